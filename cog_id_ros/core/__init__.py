@@ -1,0 +1,16 @@
+"""cog_id_ros.core: closed-link inverse dynamics by per-link COG Jacobians (numpy only).
+
+Where the paper's equations live:
+  eq. (1)-(4)  cog_jacobian.py    g_i, G_i = dg_i/dtheta_m, Gdot_i thetadot_m
+  eq. (5)      newton_euler.py    F_i = M_i qddot_i + b_i
+  eq. (6)-(7)  inverse_dynamics.py   tau = sum_i G_i^T F_i = H thetaddot + B
+and what they stand on: closure.py (loop equations, Newton), joint_motion.py (actuator to
+joint rates), kinematics.py (tree, poses, twists), spatial.py / lane_linalg.py (algebra).
+"""
+from .errors import (ClosureError, CogIdError, MechanismConfigError, SetpointError,
+                     SingularConfigurationError)
+from .inverse_dynamics import Evaluation, InverseDynamics
+from .mechanism import Mechanism
+
+__all__ = ['ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
+           'MechanismConfigError', 'SetpointError', 'SingularConfigurationError']

@@ -1,0 +1,168 @@
+"""Loop closure: the constraint equations, their Jacobian and Newton's method on them.
+
+For every loop-closing joint c between links P and C, the child attachment frame of C must
+coincide with the parent attachment frame of P moved by the joint motion M(q_c). Six
+equations per loop, written at the closure point x (the child attachment origin):
+
+    Phi_c = [ x - (o + q_c a) (prismatic only);  1/2 sum_k rP_k x rC_k ]       (position)
+    A_c qdot = [ v_C(x) - v_P(x) - q_c' a (prismatic);  w_C - w_P - q_c' a (revolute) ] = 0
+
+A planar loop gives six equations of rank three; the least-squares solves (lane_linalg)
+take that in their stride. The velocity form is linear in the rates of the joints of the
+loop (its cycle through the tree plus the loop joint itself), so A is assembled from the
+joint twists of forward_kinematics; its time derivative along the motion, the bias beta
+with A qddot + beta = 0, comes from the acceleration recursion.
+"""
+import numpy as np
+
+from . import kinematics as kin
+from . import spatial as sp
+from .lane_linalg import QRLeastSquares
+
+
+class LoopState:
+    """Per loop: closure point x (base frame), residual (6 lanes), and the cosine of the
+    angle between the two attachment frames (a half-turn also zeroes the residual)."""
+    __slots__ = ('x', 'residual', 'cosine')
+
+
+def loop_closure(model, frames, q, ops):
+    """Residuals of every loop at configuration q (frames from forward_kinematics)."""
+    states = []
+    for lp in model.loops:
+        qc = q[lp.joint]
+        if lp.revolute:
+            r_moved = sp.mat_combination(lp.d0, lp.d1, ops.sin(qc), lp.d2, 1.0 - ops.cos(qc))
+            t_moved = lp.t_pj
+        else:
+            r_moved = lp.d0
+            t_moved = sp.add_scaled(lp.t_pj, lp.axis_p, qc)
+        r_p, target = kin.to_base(frames, lp.parent, r_moved, t_moved)
+        r_c, x = kin.to_base(frames, lp.child, lp.r_cj, lp.t_cj)
+        st = LoopState()
+        st.x = x
+        st.residual = sp.sub(x, target) + sp.orientation_error(r_p, r_c)
+        st.cosine = sp.rotation_cosine(r_p, r_c)
+        states.append(st)
+    return states
+
+
+def closure_jacobian_columns(model, frames, loops):
+    """A as a list of columns (one per joint, each a list of 6 L lanes; rows [v(x); w])."""
+    n_rows = 6 * len(model.loops)
+    columns = [[0.0] * n_rows for _ in range(model.n_joints)]
+    for li, (lp, st) in enumerate(zip(model.loops, loops)):
+        row = 6 * li
+        entries = [(j, sign) for j, sign in lp.cycle] + [(lp.joint, -1.0)]
+        for j, sign in entries:
+            v, w = sp.twist_at(frames.xi[j], st.x)
+            col = columns[j]
+            col[row:row + 3] = sp.scale(v, sign)
+            col[row + 3:row + 6] = sp.scale(w, sign)
+    return columns
+
+
+def closure_bias(model, frames, loops, twists, bias_acc, qdot):
+    """beta with A qddot + beta = 0: the closure equations differentiated twice at qddot = 0."""
+    beta = []
+    for lp, st in zip(model.loops, loops):
+        acc = sp.twist_add_scaled(kin.twist_of(bias_acc, lp.child), kin.twist_of(bias_acc, lp.parent), -1.0)
+        rate_of_xi = sp.motion_cross(kin.twist_of(twists, lp.parent), frames.xi[lp.joint])
+        acc = sp.twist_add_scaled(acc, rate_of_xi, -qdot[lp.joint])
+        v, w = sp.twist_at(acc, st.x)
+        beta.extend(v)
+        beta.extend(w)
+    return beta
+
+
+class ClosureSolution:
+    """A configuration after Newton's method, with everything evaluated there.
+
+    q: all joint coordinates (lanes); frames, loops, columns (A), lsq (QR of the columns of
+    the joints that were solved for); residual: max |Phi| (lane); converged (bool lane);
+    iterations.
+    """
+    __slots__ = ('q', 'frames', 'loops', 'columns', 'lsq', 'residual', 'converged', 'iterations')
+
+
+def evaluate(model, q, free, ops):
+    """Forward kinematics, closure residual and Jacobian, QR of the free columns at q."""
+    sol = ClosureSolution()
+    sol.q = q
+    sol.frames = kin.forward_kinematics(model, q, ops)
+    sol.loops = loop_closure(model, sol.frames, q, ops)
+    sol.residual = ops.maxabs([r for st in sol.loops for r in st.residual])
+    sol.columns = closure_jacobian_columns(model, sol.frames, sol.loops)
+    sol.lsq = QRLeastSquares([sol.columns[j] for j in free], ops)
+    return sol
+
+
+def _closed(sol, tol):
+    ok = sol.residual < tol
+    for st in sol.loops:
+        ok = ok & (st.cosine > 0.0)
+    return ok
+
+
+def solve_closure(model, q, free, ops, tol, max_iter=30, max_step=0.5):
+    """Newton's method (Gauss-Newton where the equations are redundant) on the closure
+    equations over the coordinates ``free``, from ``q``; the others stay fixed.
+
+    Steps are least-squares solutions from QR and limited to ``max_step`` (rad or m) in
+    every coordinate, which keeps a poor start from jumping to another assembly branch.
+    """
+    q = list(q)
+    scalar = ops.maxabs is sp.ScalarOps.maxabs
+    for iteration in range(max_iter + 1):
+        sol = evaluate(model, q, free, ops)
+        converged = _closed(sol, tol)
+        if iteration == max_iter or (converged if scalar else bool(np.all(converged))):
+            break
+        residual = [r for st in sol.loops for r in st.residual]
+        step = sol.lsq.solve(residual)
+        size = ops.maxabs(step)
+        if scalar:
+            if size != size or size < 1e-15 * (1.0 + ops.maxabs(q)):
+                break                           # NaN, or stagnated: no reachable closure
+            factor = min(1.0, max_step / size) if size > 0 else 1.0
+        else:
+            with np.errstate(divide='ignore', invalid='ignore'):
+                factor = np.where(size > max_step, max_step / size, 1.0)
+            factor = np.where(np.isfinite(factor), factor, 0.0)
+        for k, j in enumerate(free):
+            q[j] = q[j] - step[k] * factor
+    sol.converged = converged
+    sol.iterations = iteration
+    return sol
+
+
+def closure_jacobian_matrix(model, q):
+    """A at one configuration as a numpy matrix (6 L x n_joints), for load-time analysis."""
+    sol = evaluate(model, list(q), [], sp.ScalarOps)
+    matrix = np.zeros((6 * len(model.loops), model.n_joints))
+    for j, col in enumerate(sol.columns):
+        matrix[:, j] = col
+    return matrix, sol
+
+
+def assemble(model, q, tol, max_iter=100, max_step=0.2):
+    """Close every loop from ``q`` moving all coordinates (minimum-norm Gauss-Newton steps).
+
+    Load time only (numpy least squares on the full, column-rank-deficient Jacobian).
+    Returns (q, residual, converged).
+    """
+    q = [float(x) for x in q]
+    residual = 0.0
+    for _ in range(max_iter):
+        matrix, sol = closure_jacobian_matrix(model, q)
+        residual = sol.residual
+        if _closed(sol, tol):
+            return q, residual, True
+        phi = np.array([r for st in sol.loops for r in st.residual])
+        step = np.linalg.lstsq(matrix, phi, rcond=1e-12)[0]
+        size = np.max(np.abs(step))
+        if not np.isfinite(size):
+            break
+        step *= min(1.0, max_step / size) if size > 0 else 1.0
+        q = [x - d for x, d in zip(q, step)]
+    return q, residual, False

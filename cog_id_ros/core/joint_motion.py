@@ -1,0 +1,78 @@
+"""From actuator rates to the rates of every joint: qdot = S thetadot, qddot = S thetaddot + d.
+
+The feasible joint velocities are the null space of the closure Jacobian A. With ``dof``
+primary actuators p (mechanism.primary) and the other joints f, a basis is
+    V = [I; T] (rows p; f),   T = -A_f^+ A_p.
+With V_a the active rows of V and W the torque weights, the active-to-joint map is
+    S = V (V_a^T W^-1 V_a)^-1 V_a^T W^-1
+which is [I; T] when every actuator is primary (no redundancy), and otherwise projects a
+slightly inconsistent redundant rate vector in the W^-1 metric. Its transpose gives the
+weighted minimum-norm torques: tau = S^T Q minimises sum w_k tau_k^2 subject to
+V_a^T tau = V^T Q (virtual work). S does not depend on the choice of basis V.
+
+The accelerations satisfy A qddot + beta = 0 (closure.closure_bias). With c any solution
+(c_p = 0, c_f = -A_f^+ beta), qddot = S thetaddot + (c - S c_a): the last term is the
+drift, Gdot thetadot in the paper's eq. (4) once mapped onto the links.
+"""
+from .lane_linalg import solve_spd
+
+
+def velocity_basis(mechanism, sol):
+    """V as a list over joints of lists over the ``dof`` primary actuators (lanes)."""
+    primary = mechanism.primary_joints
+    columns = [sol.columns[j] for j in primary]
+    t = [sol.lsq.solve(col) for col in columns]           # A_f^+ A_p, column by column
+    basis = [None] * len(mechanism.joints)
+    for k, j in enumerate(primary):
+        row = [0.0] * len(primary)
+        row[k] = 1.0
+        basis[j] = row
+    for i, j in enumerate(mechanism.free_joints):
+        basis[j] = [-t[k][i] for k in range(len(primary))]
+    return basis
+
+
+def projection_gram(mechanism, basis, ops):
+    """(V_a^T W^-1 V_a, V_a^T W^-1): the normal equations of the weighted projection."""
+    w_inv = mechanism.inverse_torque_weights
+    rows = [basis[j] for j in mechanism.active_index]
+    dof = mechanism.dof
+    va_t_winv = [[rows[a][k] * w_inv[a] for a in range(len(rows))] for k in range(dof)]
+    gram = [[sum(va_t_winv[k][a] * rows[a][l] for a in range(len(rows))) for l in range(dof)]
+            for k in range(dof)]
+    return gram, va_t_winv
+
+
+def active_velocity_map(mechanism, basis, ops):
+    """S (list over joints of lists over active joints): qdot = S thetadot."""
+    if not mechanism.is_redundant:
+        order = mechanism.primary             # primary k is active joint order[k]
+        m = len(order)
+        s = [[0.0] * m for _ in basis]
+        for j, row in enumerate(basis):
+            for k, a in enumerate(order):
+                s[j][a] = row[k]
+        return s
+    gram, va_t_winv = projection_gram(mechanism, basis, ops)
+    x = solve_spd(gram, va_t_winv, ops)                  # dof x M
+    dof = mechanism.dof
+    m = len(mechanism.active_index)
+    return [[sum(row[k] * x[k][a] for k in range(dof)) for a in range(m)] for row in basis]
+
+
+def closure_drift(mechanism, sol, velocity_map, beta):
+    """d = c - S c_a with A c = -beta, c = 0 on the primary joints (list over joints)."""
+    n = len(mechanism.joints)
+    c = [0.0] * n
+    if beta:
+        for j, value in zip(mechanism.free_joints, sol.lsq.solve(beta)):
+            c[j] = -value
+    if not mechanism.is_redundant:
+        return c
+    c_active = [c[j] for j in mechanism.active_index]
+    return [c[j] - sum(s * ca for s, ca in zip(velocity_map[j], c_active)) for j in range(n)]
+
+
+def combine(matrix, vector):
+    """matrix @ vector for a list-of-rows matrix of lanes."""
+    return [sum(m * v for m, v in zip(row, vector)) for row in matrix]

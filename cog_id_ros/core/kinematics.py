@@ -1,0 +1,257 @@
+"""Spanning tree, forward kinematics and the velocity / acceleration recursions over it.
+
+The link-joint graph is cut into a spanning tree rooted at the base link (breadth-first, in
+the order joints are listed); every other joint closes a loop. A tree joint may be written in
+either direction: the edge remembers a sign so that the joint coordinate keeps its meaning
+(motion of the joint's child attachment frame relative to its parent attachment frame).
+
+Every joint coordinate, tree or loop-closing, is a coordinate of the model; the loop-closing
+ones are tied to the others by the closure equations (closure.py).
+"""
+from dataclasses import dataclass, field
+
+from . import spatial as sp
+from .errors import MechanismConfigError
+
+BASE = -1
+
+
+@dataclass
+class JointSpec:
+    name: str
+    revolute: bool
+    parent: int          # link index, BASE for the base link
+    child: int
+    parent_xyz: tuple
+    parent_rpy: tuple
+    child_xyz: tuple
+    child_rpy: tuple
+    axis: tuple          # unit vector in the joint frame
+
+
+@dataclass
+class TreeEdge:
+    """A tree joint oriented from tree parent to tree child, with its constants folded.
+
+    The child link's pose in the parent link frame is L(q) = A M(sign q) B, where A and B
+    are the attachment frames (A = parent side of the tree edge, B the inverse of the child
+    side) and M the joint motion. For a revolute joint with K = skew(axis):
+      R_L = r0 + sin(q) r1 + (1 - cos q) r2,  t_L = t0 + sin(q) t1 + (1 - cos q) t2
+    and for a prismatic one R_L = r0, t_L = t0 + q t1. The sign is folded into r1, t1.
+    """
+    joint: int
+    parent: int
+    child: int
+    sign: float
+    revolute: bool
+    r0: tuple
+    r1: tuple
+    r2: tuple
+    t0: tuple
+    t1: tuple
+    t2: tuple
+    axis_p: tuple        # joint axis in the tree-parent link frame
+    origin_p: tuple      # a point of the joint axis in the tree-parent link frame
+
+
+@dataclass
+class LoopJoint:
+    """A loop-closing joint between its declared parent and child links."""
+    joint: int
+    parent: int
+    child: int
+    revolute: bool
+    d0: tuple            # R_pj, R_pj K, R_pj K^2: parent attachment rotation after motion q is
+    d1: tuple            # d0 + sin(q) d1 + (1 - cos q) d2 (revolute) or d0 (prismatic)
+    d2: tuple
+    t_pj: tuple
+    axis_p: tuple        # joint axis in the parent link frame
+    r_cj: tuple
+    t_cj: tuple
+    cycle: list = field(default_factory=list)   # (tree joint, +1/-1): twist_child - twist_parent
+
+
+class KinematicModel:
+    """The spanning tree and the loop-closing joints of a mechanism, ready to evaluate."""
+
+    def __init__(self, link_names, joints):
+        self.link_names = list(link_names)
+        self.joints = list(joints)
+        self.n_links = len(self.link_names)
+        self.n_joints = len(self.joints)
+        self.edges, self.loops = [], []
+        self.edge_of_link = [None] * self.n_links
+        self._build_tree()
+
+    def _build_tree(self):
+        reached = {BASE}
+        queue = [BASE]
+        in_tree = set()
+        path = {BASE: []}
+        while queue:
+            link = queue.pop(0)
+            for j, spec in enumerate(self.joints):
+                if j in in_tree or link not in (spec.parent, spec.child):
+                    continue
+                other = spec.child if spec.parent == link else spec.parent
+                if other in reached:
+                    continue
+                edge = _tree_edge(j, spec, link, other)
+                self.edge_of_link[other] = len(self.edges)
+                self.edges.append(edge)
+                in_tree.add(j)
+                reached.add(other)
+                path[other] = path[link] + [(j, edge.sign)]
+                queue.append(other)
+        missing = [self.link_names[k] for k in range(self.n_links) if k not in reached]
+        if missing:
+            raise MechanismConfigError(
+                'mechanism.links',
+                f"link '{missing[0]}' is not connected to the base link by any chain of joints")
+        for j, spec in enumerate(self.joints):
+            if j not in in_tree:
+                loop = _loop_joint(j, spec)
+                on_child = dict(path[spec.child])
+                on_parent = dict(path[spec.parent])
+                loop.cycle = [(i, 1.0) for i in on_child if i not in on_parent] + \
+                             [(i, -1.0) for i in on_parent if i not in on_child]
+                self.loops.append(loop)
+        self.tree_joints = [e.joint for e in self.edges]
+        self.loop_joints = [lp.joint for lp in self.loops]
+
+
+def _tree_edge(j, spec, tree_parent, tree_child):
+    r_pj, r_cj = sp.rpy_matrix(spec.parent_rpy), sp.rpy_matrix(spec.child_rpy)
+    if spec.parent == tree_parent:   # written from the tree parent outwards
+        sign, r_a, t_a, r_c, t_c = 1.0, r_pj, spec.parent_xyz, r_cj, spec.child_xyz
+    else:                            # written towards the base: the tree sees -q
+        sign, r_a, t_a, r_c, t_c = -1.0, r_cj, spec.child_xyz, r_pj, spec.parent_xyz
+    r_b = sp.transpose(r_c)
+    t_b = sp.scale(sp.mat_vec(r_b, t_c), -1.0)
+    k = sp.skew(spec.axis)
+    k2 = sp.mat_mat(k, k)
+    r_ak = sp.mat_mat(r_a, k)
+    r_ak2 = sp.mat_mat(r_a, k2)
+    axis_p = sp.mat_vec(r_a, spec.axis)
+    t0 = sp.add(t_a, sp.mat_vec(r_a, t_b))
+    if spec.revolute:
+        r1 = sp.mat_mat(r_ak, r_b)
+        return TreeEdge(j, tree_parent, tree_child, sign, True,
+                        sp.mat_mat(r_a, r_b), tuple(sign * x for x in r1), sp.mat_mat(r_ak2, r_b),
+                        t0, sp.scale(sp.mat_vec(r_ak, t_b), sign), sp.mat_vec(r_ak2, t_b),
+                        axis_p, tuple(t_a))
+    return TreeEdge(j, tree_parent, tree_child, sign, False,
+                    sp.mat_mat(r_a, r_b), sp.IDENTITY, sp.IDENTITY,
+                    t0, sp.scale(axis_p, sign), sp.ZERO3, axis_p, tuple(t_a))
+
+
+def _loop_joint(j, spec):
+    r_pj = sp.rpy_matrix(spec.parent_rpy)
+    k = sp.skew(spec.axis)
+    return LoopJoint(j, spec.parent, spec.child, spec.revolute,
+                     r_pj, sp.mat_mat(r_pj, k), sp.mat_mat(r_pj, sp.mat_mat(k, k)),
+                     tuple(spec.parent_xyz), sp.mat_vec(r_pj, spec.axis),
+                     sp.rpy_matrix(spec.child_rpy), tuple(spec.child_xyz))
+
+
+class Frames:
+    """Poses of every link and the unit twist of every joint, at one configuration.
+
+    ``rot[k]``, ``pos[k]``: rotation and origin of link k in the base frame.
+    ``xi[j]``: twist (base frame, Pluecker) of the joint's outer body relative to its inner
+    body per unit joint rate: tree child w.r.t. tree parent for tree joints (sign folded in),
+    declared child w.r.t. declared parent for loop-closing joints.
+    """
+    __slots__ = ('rot', 'pos', 'xi')
+
+
+def frame_of(frames, link):
+    """(rotation, origin) of a link; the base is the identity."""
+    if link == BASE:
+        return None, None
+    return frames.rot[link], frames.pos[link]
+
+
+def to_base(frames, link, r_local, t_local):
+    """Pose of a frame fixed to ``link`` (given in the link frame) in the base frame."""
+    rot, pos = frame_of(frames, link)
+    if rot is None:
+        return r_local, t_local
+    return sp.mat_mat(rot, r_local), sp.add(pos, sp.mat_vec(rot, t_local))
+
+
+def point_to_base(frames, link, point):
+    rot, pos = frame_of(frames, link)
+    if rot is None:
+        return point
+    return sp.add(pos, sp.mat_vec(rot, point))
+
+
+def vector_to_base(frames, link, vector):
+    rot, _ = frame_of(frames, link)
+    return vector if rot is None else sp.mat_vec(rot, vector)
+
+
+def joint_twist(revolute, axis, origin):
+    """Unit twist of a joint: rotation about the line (origin, axis) or translation along axis."""
+    if revolute:
+        return (axis, sp.cross(origin, axis))
+    return (sp.ZERO3, axis)
+
+
+def forward_kinematics(model, q, ops):
+    """Link poses and joint twists for joint coordinates q (list of lanes, joints order)."""
+    frames = Frames()
+    rot = [None] * model.n_links
+    pos = [None] * model.n_links
+    xi = [None] * model.n_joints
+    frames.rot, frames.pos, frames.xi = rot, pos, xi
+    for e in model.edges:
+        qj = q[e.joint]
+        if e.revolute:
+            s, c1 = ops.sin(qj), 1.0 - ops.cos(qj)
+            r_local = sp.mat_combination(e.r0, e.r1, s, e.r2, c1)
+            t_local = sp.vec_combination(e.t0, e.t1, s, e.t2, c1)
+        else:
+            r_local = e.r0
+            t_local = sp.add_scaled(e.t0, e.t1, qj)
+        rot[e.child], pos[e.child] = to_base(frames, e.parent, r_local, t_local)
+        axis = sp.scale(vector_to_base(frames, e.parent, e.axis_p), e.sign)
+        xi[e.joint] = joint_twist(e.revolute, axis, point_to_base(frames, e.parent, e.origin_p))
+    for lp in model.loops:
+        axis = vector_to_base(frames, lp.parent, lp.axis_p)
+        xi[lp.joint] = joint_twist(lp.revolute, axis, point_to_base(frames, lp.parent, lp.t_pj))
+    return frames
+
+
+def link_twists(model, frames, qdot):
+    """Twist of every link for joint rates qdot (eq. 2 before projection onto the links' COGs)."""
+    twists = [None] * model.n_links
+    for e in model.edges:
+        xi = frames.xi[e.joint]
+        rate = qdot[e.joint]
+        if e.parent == BASE:
+            twists[e.child] = (sp.scale(xi[0], rate), sp.scale(xi[1], rate))
+        else:
+            twists[e.child] = sp.twist_add_scaled(twists[e.parent], xi, rate)
+    return twists
+
+
+def twist_of(twists, link):
+    return sp.ZERO_TWIST if link == BASE else twists[link]
+
+
+def link_bias_accelerations(model, frames, twists, qdot):
+    """Spatial acceleration of every link when all joint accelerations are zero.
+
+    A joint twist is fixed in the inner body, so it changes at the rate twist_parent x xi:
+    a_child = a_parent + (v_parent x xi) qdot  (+ xi qddot, added separately).
+    """
+    acc = [None] * model.n_links
+    for e in model.edges:
+        if e.parent == BASE:
+            acc[e.child] = sp.ZERO_TWIST     # the joint twist of a grounded joint is constant
+        else:
+            rate_of_xi = sp.motion_cross(twists[e.parent], frames.xi[e.joint])
+            acc[e.child] = sp.twist_add_scaled(acc[e.parent], rate_of_xi, qdot[e.joint])
+    return acc

@@ -1,0 +1,198 @@
+"""Spatial algebra on lanes: the one small place where vectors, rotations and twists live.
+
+Every scalar here is a *lane*: either a Python float (one sample, the lean per-sample path
+a control loop calls) or a numpy array of shape (N,) (N samples, the vectorised batch path).
+Elementwise arithmetic is the same for both, so every kinematic and dynamic quantity is
+written once and serves both paths. Vectors are 3-tuples of lanes, rotation matrices
+9-tuples of lanes in row-major order.
+
+Twists are Pluecker vectors in the base frame: ``(w, v0)`` with ``w`` the angular velocity
+and ``v0`` the velocity of the body point that passes through the base origin, so that the
+velocity of a body point at ``x`` is ``v0 + w x x`` and twists of a chain simply add.
+Spatial accelerations ``(alpha, a0)`` are their time derivatives (Featherstone's convention).
+"""
+import math
+
+import numpy as np
+
+IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+ZERO3 = (0.0, 0.0, 0.0)
+
+
+class ScalarOps:
+    """Lane functions for Python floats (one sample)."""
+
+    sin = staticmethod(math.sin)
+    cos = staticmethod(math.cos)
+
+    @staticmethod
+    def sqrt(x):
+        return math.sqrt(x) if x >= 0.0 else math.nan
+
+    @staticmethod
+    def recip(x):
+        return 1.0 / x if x != 0.0 else math.inf
+
+    @staticmethod
+    def maxabs(lanes):
+        return max(map(abs, lanes)) if lanes else 0.0
+
+
+class ArrayOps:
+    """Lane functions for numpy arrays of shape (N,) (N samples)."""
+
+    sin = staticmethod(np.sin)
+    cos = staticmethod(np.cos)
+
+    @staticmethod
+    def sqrt(x):
+        with np.errstate(invalid='ignore'):
+            return np.sqrt(x)
+
+    @staticmethod
+    def recip(x):
+        with np.errstate(divide='ignore', invalid='ignore'):
+            return 1.0 / x
+
+    @staticmethod
+    def maxabs(lanes):
+        if not lanes:
+            return 0.0
+        return np.max(np.abs(np.broadcast_arrays(*lanes)), axis=0)
+
+
+# --- 3-vectors -------------------------------------------------------------------------
+
+def add(a, b):
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+def sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def scale(a, s):
+    return (a[0] * s, a[1] * s, a[2] * s)
+
+
+def add_scaled(a, b, s):
+    """a + s b."""
+    return (a[0] + b[0] * s, a[1] + b[1] * s, a[2] + b[2] * s)
+
+
+def dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0])
+
+
+# --- rotation matrices (9-tuples, row-major) ---------------------------------------------
+
+def mat_vec(r, v):
+    return (r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
+            r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
+            r[6] * v[0] + r[7] * v[1] + r[8] * v[2])
+
+
+def mat_t_vec(r, v):
+    """r^T v."""
+    return (r[0] * v[0] + r[3] * v[1] + r[6] * v[2],
+            r[1] * v[0] + r[4] * v[1] + r[7] * v[2],
+            r[2] * v[0] + r[5] * v[1] + r[8] * v[2])
+
+
+def mat_mat(a, b):
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = a
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = b
+    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
+            a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
+            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
+
+
+def transpose(r):
+    return (r[0], r[3], r[6], r[1], r[4], r[7], r[2], r[5], r[8])
+
+
+def mat_combination(m0, m1, s1, m2, s2):
+    """m0 + s1 m1 + s2 m2, entrywise (constant matrices, lane weights)."""
+    return tuple(x0 + x1 * s1 + x2 * s2 for x0, x1, x2 in zip(m0, m1, m2))
+
+
+def vec_combination(v0, v1, s1, v2, s2):
+    """v0 + s1 v1 + s2 v2."""
+    return (v0[0] + v1[0] * s1 + v2[0] * s2,
+            v0[1] + v1[1] * s1 + v2[1] * s2,
+            v0[2] + v1[2] * s1 + v2[2] * s2)
+
+
+def column(r, k):
+    return (r[k], r[3 + k], r[6 + k])
+
+
+def orientation_error(ra, rb):
+    """Rotation of frame b relative to frame a, as a base-frame vector: 1/2 sum_k a_k x b_k.
+
+    Zero when the frames coincide; its time derivative there is w_b - w_a, so it pairs with
+    the angular rows of the closure Jacobian in Newton's method (it also vanishes for a
+    half-turn, which the closure solver rules out by checking ``rotation_cosine``).
+    """
+    e = ZERO3
+    for k in range(3):
+        e = add(e, cross(column(ra, k), column(rb, k)))
+    return scale(e, 0.5)
+
+
+def rotation_cosine(ra, rb):
+    """cos of the angle between two frames: (trace(ra^T rb) - 1) / 2."""
+    return (sum(ra[i] * rb[i] for i in range(9)) - 1.0) * 0.5
+
+
+# --- constant frames (plain floats, built once at load time) -----------------------------
+
+def rpy_matrix(rpy):
+    """URDF roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p),
+                              math.cos(y), math.sin(y))
+    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+            sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+            -sp, cp * sr, cp * cr)
+
+
+def skew(u):
+    """The matrix K with K v = u x v."""
+    return (0.0, -u[2], u[1], u[2], 0.0, -u[0], -u[1], u[0], 0.0)
+
+
+def rotation_about(axis_unit, angle, ops=ScalarOps):
+    """Rodrigues: I + sin(q) K + (1 - cos(q)) K^2."""
+    k = skew(axis_unit)
+    return mat_combination(IDENTITY, k, ops.sin(angle), mat_mat(k, k), 1.0 - ops.cos(angle))
+
+
+# --- twists (Pluecker, base frame) -------------------------------------------------------
+
+def twist_add_scaled(t, u, s):
+    """t + s u for twists."""
+    return (add_scaled(t[0], u[0], s), add_scaled(t[1], u[1], s))
+
+
+def twist_at(t, x):
+    """Twist t as (velocity of the body point at x, angular velocity)."""
+    w, v0 = t
+    return (add(v0, cross(w, x)), w)
+
+
+def motion_cross(t, u):
+    """Spatial cross product t x u of two twists: the rate of change of a twist u
+    fixed in a body that moves with twist t."""
+    w, v0 = t
+    wu, vu = u
+    return (cross(w, wu), add(cross(w, vu), cross(v0, wu)))
+
+
+ZERO_TWIST = (ZERO3, ZERO3)

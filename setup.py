@@ -1,0 +1,32 @@
+"""Install cog_id_ros: as an ament_python package under colcon, or with pip into a venv."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'cog_id_ros'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*', 'bench']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/config', sorted(glob('config/*.yaml') + glob('config/*.csv'))),
+    ],
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
+    zip_safe=True,
+    maintainer='cog_id_ros developers',
+    maintainer_email='dev@cog-id-ros.invalid',
+    description='Closed-link inverse dynamics by per-link COG Jacobians, as a ROS 2 node',
+    license='Apache-2.0',
+    python_requires='>=3.10',
+    entry_points={
+        'console_scripts': [
+            'cog_id_node = cog_id_ros.node:main',
+            'cog_id_torques = cog_id_ros.cli:main',
+            'cog_id_player = cog_id_ros.player:main',
+            'cog_id_demo = cog_id_ros.demo:main',
+        ],
+    },
+)
