@@ -164,5 +164,5 @@ def assemble(model, q, tol, max_iter=100, max_step=0.2):
         if not np.isfinite(size):
             break
         step *= min(1.0, max_step / size) if size > 0 else 1.0
-        q = [x - d for x, d in zip(q, step)]
+        q = [float(x - d) for x, d in zip(q, step)]
     return q, residual, False

@@ -165,6 +165,15 @@ class InverseDynamics:
                      [[gw[r] for _, gw in cols] for r in range(3)] for cols in jac],)
         return self._per_sample(q, compute)[0]
 
+    def cog_drifts(self, q, qd):
+        """Gdot_i thetadot (eq. 4): (n_links, 6) or (N, n_links, 6): COG acceleration and link
+        angular acceleration when thetaddot = 0."""
+        def compute(step, ops, qd_lanes):
+            s, cogs, jac = self._cog_jacobians(step, ops)
+            _, drifts = self._cog_motion(step, s, cogs, jac, qd_lanes, ops)
+            return ([list(a) + list(alpha) for a, alpha in drifts],)
+        return self._per_sample(q, compute, qd)[0]
+
     def equation_of_motion(self, q, qd=None):
         """H (M, M) and B (M,) of eq. (7), tau = H qdd + B; batch: (N, M, M), (N, M)."""
         def compute(step, ops, qd_lanes):
@@ -182,8 +191,8 @@ class InverseDynamics:
         jac, _ = cog_jacobians(m, step.sol.frames, cogs, s)
         return s, cogs, jac
 
-    def _drift_forces(self, step, s, cogs, jac, qd, ops, qdd=None):
-        """F_i of eq. (5) with the COG accelerations of eq. (4) (thetaddot = qdd, or 0)."""
+    def _cog_motion(self, step, s, cogs, jac, qd, ops):
+        """COG velocities (eq. 2) and drifts Gdot_i thetadot (eq. 4, thetaddot = 0)."""
         m = self.mechanism
         model, sol = m.model, step.sol
         qdot = combine(s, qd)
@@ -194,7 +203,12 @@ class InverseDynamics:
         drift_twists = link_twists(model, sol.frames, drift)
         drift_acc = [sp.twist_add_scaled(b, d, 1.0) for b, d in zip(bias, drift_twists)]
         velocities = cog_velocities(jac, qd)
-        accelerations = cog_drifts(cogs, velocities, drift_acc)
+        return velocities, cog_drifts(cogs, velocities, drift_acc)
+
+    def _drift_forces(self, step, s, cogs, jac, qd, ops, qdd=None):
+        """F_i of eq. (5) with the COG accelerations of eq. (4) (thetaddot = qdd, or 0)."""
+        m = self.mechanism
+        velocities, accelerations = self._cog_motion(step, s, cogs, jac, qd, ops)
         if qdd is not None:
             accelerations = cog_accelerations(jac, accelerations, qdd)
         forces = []

@@ -36,6 +36,7 @@ class Mechanism:
 
     def __init__(self, params):
         reader = ParameterReader(params)
+        self.parameters = dict(reader.params)
         self._read_mechanism(reader)
         self._read_links(reader)
         self._read_joints(reader)

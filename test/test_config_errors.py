@@ -1,0 +1,105 @@
+"""Every configuration error of mechanism-params.md names its parameter."""
+import pytest
+
+import cog_id_ros
+from mechanisms import double_pendulum, four_bar, from_yaml, with_changes
+
+PAPER_A = 'config/paper_four_bar_a.yaml'
+
+
+def pendulum_on_coupler(active):
+    """Four-bar plus a pendulum hanging from the coupler: 2 DOF."""
+    p = four_bar(active=active, init=[1.5707963267948966, -1.5707963267948966,
+                                      1.5707963267948966, 1.5707963267948966, 0.0])
+    p['mechanism.links'] = p['mechanism.links'] + ['bob']
+    p['mechanism.joints'] = p['mechanism.joints'] + ['joint5']
+    p.update({'links.bob.mass': 0.2, 'links.bob.com': [0.1, 0, 0],
+              'joints.joint5.type': 'revolute', 'joints.joint5.parent': 'link2',
+              'joints.joint5.child': 'bob', 'joints.joint5.parent_xyz': [0.25, 0, 0]})
+    return p
+
+
+CASES = [
+    # (parameter, message fragment, changes to the paper four-bar (a))
+    ('links.link2.mass', 'must be >= 0, got -1.0', {'links.link2.mass': -1.0}),
+    ('links.link3.mass', 'missing', {'links.link3.mass': None}),
+    ('links.link1.mass', 'must be a number', {'links.link1.mass': 'heavy'}),
+    ('links.link1.inertia', 'positive semi-definite', {'links.link1.inertia': [1, 1, 1, 2, 0, 0]}),
+    ('links.link1.inertia', 'triangle inequality', {'links.link1.inertia': [0.1, 0.1, 0.5, 0, 0, 0]}),
+    ('links.link1.inertia', 'must have 6 entries', {'links.link1.inertia': [1.0, 2.0, 3.0]}),
+    ('links.link1.inertia', 'must be symmetric', {'links.link1.inertia': [1, 0.1, 0, 0, 1, 0, 0, 0, 1]}),
+    ('links.link1.com', 'must have 3 entries', {'links.link1.com': [0.25, 0.0]}),
+    ('links.link1.mas', 'unknown parameter', {'links.link1.mas': 1.0}),
+    ('links.link9.mass', "unknown link 'link9'", {'links.link9.mass': 1.0}),
+    ('joints.joint2.axis', 'zero-length', {'joints.joint2.axis': [0, 0, 0]}),
+    ('joints.joint2.type', "must be 'revolute' or 'prismatic', got 'ball'", {'joints.joint2.type': 'ball'}),
+    ('joints.joint2.type', 'missing', {'joints.joint2.type': None}),
+    ('joints.joint2.child', "unknown link 'lnk2'", {'joints.joint2.child': 'lnk2'}),
+    ('joints.joint2.child', 'must differ from the parent', {'joints.joint2.child': 'link1'}),
+    ('joints.joint2.parent_xyz', 'must have 3 entries', {'joints.joint2.parent_xyz': [0.5]}),
+    ('joints.joint7.type', "unknown joint 'joint7'", {'joints.joint7.type': 'revolute'}),
+    ('mechanism.links', "duplicate name 'link2'", {'mechanism.links': ['link1', 'link2', 'link2']}),
+    ('mechanism.joints', "duplicate name 'joint1'", {'mechanism.joints': ['joint1', 'joint1', 'joint3', 'joint4']}),
+    ('mechanism.links', 'missing', {'mechanism.links': None}),
+    ('mechanism.links', 'must not be listed', {'mechanism.links': ['ground', 'link1', 'link2', 'link3']}),
+    ('mechanism.active_joints', "'joint9' is not in mechanism.joints", {'mechanism.active_joints': ['joint9']}),
+    ('mechanism.initial_positions', 'must have 4 entries', {'mechanism.initial_positions': [0.0, 1.0]}),
+    ('mechanism.torque_weights', 'must have 1 entries', {'mechanism.torque_weights': [1.0, 2.0]}),
+    ('mechanism.torque_weights', 'must be positive', {'mechanism.torque_weights': [0.0]}),
+    ('mechanism.gravity', 'must have 3 entries', {'mechanism.gravity': [0.0, -9.81]}),
+    ('mechanism.gravty', 'unknown parameter', {'mechanism.gravty': [0.0, -9.81, 0.0]}),
+    ('mechanism.initial_positions', 'cannot be closed',
+     {'joints.joint3.parent_xyz': [2.5, 0.0, 0.0]}),
+    ('mechanism.links', "link 'link4' is not connected",
+     {'mechanism.links': ['link1', 'link2', 'link3', 'link4'], 'links.link4.mass': 1.0}),
+]
+
+
+@pytest.mark.parametrize('parameter,fragment,changes', CASES, ids=[c[0] + ':' + c[1][:20] for c in CASES])
+def test_configuration_error_names_the_parameter(parameter, fragment, changes):
+    params = with_changes(from_yaml(PAPER_A), **{k.replace('.', '__'): v for k, v in changes.items()})
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert info.value.parameter == parameter
+    assert str(info.value).startswith(parameter + ': ')
+    assert fragment in str(info.value)
+
+
+def test_too_few_active_joints_for_the_degrees_of_freedom():
+    params = with_changes(double_pendulum(), mechanism__active_joints=['shoulder'])
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert info.value.parameter == 'mechanism.active_joints'
+    assert '1 active joint(s) for 2 degrees of freedom' in str(info.value)
+
+
+def test_active_joints_that_leave_a_passive_joint_free_are_rejected():
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(pendulum_on_coupler(['joint1', 'joint3']))
+    assert info.value.parameter == 'mechanism.active_joints'
+    assert 'do not determine the motion' in str(info.value)
+    # the same mechanism with an actuator on the pendulum is fine
+    assert cog_id_ros.Mechanism.from_parameters(pendulum_on_coupler(['joint1', 'joint5'])).dof == 2
+
+
+def test_yaml_integers_are_accepted_where_floats_are_meant():
+    params = with_changes(from_yaml(PAPER_A), joints__joint2__axis=[0, 0, 1], links__link1__mass=1,
+                          mechanism__gravity=[0, -10, 0])
+    assert cog_id_ros.Mechanism.from_parameters(params).dof == 1
+
+
+def test_params_file_errors_name_the_file(tmp_path):
+    with pytest.raises(cog_id_ros.MechanismConfigError, match='cannot read'):
+        cog_id_ros.Mechanism.from_params_file(str(tmp_path / 'absent.yaml'))
+    other = tmp_path / 'other_node.yaml'
+    other.write_text('some_other_node:\n  ros__parameters:\n    x: 1\n')
+    with pytest.raises(cog_id_ros.MechanismConfigError, match="no entry for node 'cog_id_node'"):
+        cog_id_ros.Mechanism.from_params_file(str(other))
+
+
+def test_node_entry_overrides_the_wildcard(tmp_path):
+    text = open(PAPER_A, encoding='utf-8').read()
+    path = tmp_path / 'both.yaml'
+    path.write_text(text + '\ncog_id_node:\n  ros__parameters:\n    mechanism:\n      name: renamed\n')
+    assert cog_id_ros.Mechanism.from_params_file(str(path)).name == 'renamed'
+    assert cog_id_ros.Mechanism.from_params_file(str(path), node_name='other').name == 'paper_four_bar_a'
