@@ -7,48 +7,53 @@ the column space, and the factor R stays square and invertible as long as the co
 independent. Loss of column rank is a singular configuration; ``condition_number`` measures
 how close a configuration is to it.
 """
+from operator import mul
+
+
 def _dot(a, b):
-    s = 0.0
-    for x, y in zip(a, b):
-        s = s + x * y
-    return s
+    return sum(map(mul, a, b))
 
 
 class QRLeastSquares:
-    """Least squares min ||A x - b|| for A given as a list of columns (each a list of lanes)."""
+    """Least squares min ||A x - b|| for A given as a list of columns (each a list of lanes).
+
+    A = Q R with Q's columns orthonormal and R square upper triangular; R^-1 is formed once
+    (it serves every solve and the condition number), so a solve is Q^T b and a product.
+    """
 
     def __init__(self, columns, ops):
         self.ops = ops
-        self.n = len(columns)
-        self.q = []
-        self.r = [[0.0] * self.n for _ in range(self.n)]
+        n = self.n = len(columns)
+        q = self.q = []
+        r = [[0.0] * n for _ in range(n)]
         for j, col in enumerate(columns):
-            v = list(col)
+            v = col
             for _ in range(2):  # CGS2: a second pass makes the columns orthogonal to working precision
-                for i, qi in enumerate(self.q):
+                for i, qi in enumerate(q):
                     rij = _dot(qi, v)
-                    self.r[i][j] = self.r[i][j] + rij
+                    r[i][j] = r[i][j] + rij
                     v = [vk - rij * qk for vk, qk in zip(v, qi)]
             rjj = ops.sqrt(_dot(v, v))
-            self.r[j][j] = rjj
+            r[j][j] = rjj
             inv = ops.recip(rjj)
-            self.q.append([vk * inv for vk in v])
-        self.r_diag_inv = [ops.recip(self.r[i][i]) for i in range(self.n)]
+            q.append([vk * inv for vk in v])
+        self.r = r
+        # R^-1, column by column (upper triangular)
+        rinv = [[0.0] * n for _ in range(n)]
+        diag_inv = [ops.recip(r[i][i]) for i in range(n)]
+        for j in range(n):
+            rinv[j][j] = diag_inv[j]
+            for i in range(j - 1, -1, -1):
+                s = 0.0
+                for k in range(i + 1, j + 1):
+                    s = s + r[i][k] * rinv[k][j]
+                rinv[i][j] = -s * diag_inv[i]
+        self.rinv = rinv
 
     def solve(self, b):
         """x minimising ||A x - b|| (b: list of lanes, one per row)."""
         y = [_dot(qi, b) for qi in self.q]
-        return self._back_substitute(y)
-
-    def _back_substitute(self, y):
-        n, r = self.n, self.r
-        x = [0.0] * n
-        for i in range(n - 1, -1, -1):
-            s = y[i]
-            for k in range(i + 1, n):
-                s = s - r[i][k] * x[k]
-            x[i] = s * self.r_diag_inv[i]
-        return x
+        return [_dot(row[i:], y[i:]) for i, row in enumerate(self.rinv)]
 
     def condition_number(self):
         """Frobenius-norm condition number ||A||_F ||A^+||_F = ||R||_F ||R^-1||_F.
@@ -58,18 +63,8 @@ class QRLeastSquares:
         """
         if self.n == 0:
             return 1.0
-        n, r = self.n, self.r
-        norm_a = 0.0
-        for i in range(n):
-            for k in range(i, n):
-                norm_a = norm_a + r[i][k] * r[i][k]
-        norm_inv = 0.0
-        for j in range(n):  # column j of R^-1
-            e = [0.0] * n
-            e[j] = 1.0
-            x = self._back_substitute(e)
-            for xi in x[:j + 1]:
-                norm_inv = norm_inv + xi * xi
+        norm_a = sum(_dot(row, row) for row in self.r)
+        norm_inv = sum(_dot(row, row) for row in self.rinv)
         return self.ops.sqrt(norm_a) * self.ops.sqrt(norm_inv)
 
 

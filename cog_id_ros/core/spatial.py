@@ -119,7 +119,11 @@ def transpose(r):
 
 def mat_combination(m0, m1, s1, m2, s2):
     """m0 + s1 m1 + s2 m2, entrywise (constant matrices, lane weights)."""
-    return tuple(x0 + x1 * s1 + x2 * s2 for x0, x1, x2 in zip(m0, m1, m2))
+    return (m0[0] + m1[0] * s1 + m2[0] * s2, m0[1] + m1[1] * s1 + m2[1] * s2,
+            m0[2] + m1[2] * s1 + m2[2] * s2, m0[3] + m1[3] * s1 + m2[3] * s2,
+            m0[4] + m1[4] * s1 + m2[4] * s2, m0[5] + m1[5] * s1 + m2[5] * s2,
+            m0[6] + m1[6] * s1 + m2[6] * s2, m0[7] + m1[7] * s1 + m2[7] * s2,
+            m0[8] + m1[8] * s1 + m2[8] * s2)
 
 
 def vec_combination(v0, v1, s1, v2, s2):
