@@ -1,0 +1,118 @@
+"""Finite-difference derivatives of sampled trajectories on uneven time grids (pure numpy).
+
+The scheme used by ``cog_id_torques`` when a CSV trajectory lacks velocity or
+acceleration columns:
+
+* Every derivative at sample ``i`` is the derivative, at ``t[i]``, of the polynomial
+  of degree 4 that interpolates 5 neighbouring samples. The stencil is centred
+  (samples ``i-2 .. i+2``) wherever it fits and is shifted inward at the two ends
+  (the first two and last two samples use the first or last five samples), so it is
+  one-sided there. The weights come from Fornberg's recurrence (B. Fornberg,
+  "Generation of finite difference formulas on arbitrarily spaced grids",
+  Math. Comp. 51, 1988), evaluated for all samples at once; time steps may differ
+  from sample to sample.
+* Order of accuracy, for smooth signals and steps whose ratios stay bounded:
+  first derivative O(h^4), second derivative O(h^3) (O(h^4) at interior samples of
+  an even grid, where the centred stencil is symmetric). ``h`` is the largest step
+  in the stencil.
+* The differences are formed as ``sum_j w_j (y_j - y_i)`` (the weights of a derivative
+  sum to zero), so large unwrapped angles (a crank at 1000 rad) lose no more digits
+  than small ones.
+
+The public functions take ``t`` of shape (N,) and ``y`` of shape (N,) or (N, K) and
+return an array shaped like ``y``. They need ``N >= STENCIL`` samples and a strictly
+increasing ``t``; anything else raises ``ValueError``.
+"""
+
+import numpy as np
+
+#: samples per stencil (degree of the local interpolating polynomial + 1)
+STENCIL = 5
+
+#: order of accuracy of each derivative on any grid with bounded step ratios
+ORDER = {1: STENCIL - 1, 2: STENCIL - 2}
+
+#: one-paragraph description, shared by ``--help``, the JSON summary and the docs
+SCHEME = (
+    'derivative at each sample of the degree-4 polynomial through 5 neighbouring samples '
+    '(centred stencil i-2..i+2, shifted inward at the first and last two samples; '
+    'Fornberg weights, uneven steps allowed): velocity O(h^4), acceleration O(h^3)'
+)
+
+
+def stencil_indices(n, width=STENCIL):
+    """(n, width) sample indices of each sample's stencil: centred, clipped to [0, n)."""
+    if n < width:
+        raise ValueError(f'need at least {width} samples, got {n}')
+    start = np.arange(n) - width // 2
+    np.clip(start, 0, n - width, out=start)
+    return start[:, None] + np.arange(width)[None, :]
+
+
+def fornberg_weights(offsets, order):
+    """Finite-difference weights for the ``order``-th derivative at 0.
+
+    ``offsets`` has shape (N, S): for each of N evaluation points, the positions of its
+    S stencil nodes relative to the evaluation point (distinct values). Returns (N, S)
+    weights ``w`` with ``f^(order)(0) ~= sum_j w[:, j] * f(offsets[:, j])``, exact for
+    polynomials of degree < S. Fornberg's recurrence, vectorised over the N points.
+    """
+    x = np.asarray(offsets, dtype=float)
+    if x.ndim != 2:
+        raise ValueError(f'offsets must have shape (N, S), got {x.shape}')
+    n_points, size = x.shape
+    if not 0 <= order < size:
+        raise ValueError(f'derivative order {order} needs more than {size} nodes')
+    m = order
+    # c[j][k]: weight of node j for derivative k (arrays over the N points)
+    c = [[np.zeros(n_points) for _ in range(m + 1)] for _ in range(size)]
+    c[0][0][:] = 1.0
+    c1 = np.ones(n_points)
+    c4 = x[:, 0].copy()
+    for i in range(1, size):
+        mn = min(i, m)
+        c2 = np.ones(n_points)
+        c5 = c4
+        c4 = x[:, i]
+        for j in range(i):
+            c3 = x[:, i] - x[:, j]
+            c2 = c2 * c3
+            if j == i - 1:
+                for k in range(mn, 0, -1):
+                    c[i][k] = c1 * (k * c[i - 1][k - 1] - c5 * c[i - 1][k]) / c2
+                c[i][0] = -c1 * c5 * c[i - 1][0] / c2
+            for k in range(mn, 0, -1):
+                c[j][k] = (c4 * c[j][k] - k * c[j][k - 1]) / c3
+            c[j][0] = c4 * c[j][0] / c3
+        c1 = c2
+    return np.stack([c[j][m] for j in range(size)], axis=1)
+
+
+def derivative(t, y, order):
+    """``order``-th time derivative (1 or 2) of samples ``y`` taken at times ``t``."""
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if order not in ORDER:
+        raise ValueError(f'order must be 1 or 2, got {order}')
+    if t.ndim != 1:
+        raise ValueError(f't must be one-dimensional, got shape {t.shape}')
+    if y.shape[:1] != t.shape or y.ndim > 2:
+        raise ValueError(f'y must have shape ({t.size},) or ({t.size}, K), got {y.shape}')
+    if t.size >= 2 and not np.all(np.diff(t) > 0):
+        raise ValueError('t must be strictly increasing')
+    idx = stencil_indices(t.size)
+    offsets = t[idx] - t[:, None]
+    w = fornberg_weights(offsets, order)
+    if y.ndim == 1:
+        return np.einsum('ij,ij->i', w, y[idx] - y[:, None])
+    return np.einsum('ij,ijk->ik', w, y[idx] - y[:, None, :])
+
+
+def first_derivative(t, y):
+    """Velocity from positions (or acceleration from velocities): O(h^4)."""
+    return derivative(t, y, 1)
+
+
+def second_derivative(t, y):
+    """Acceleration from positions: O(h^3) (O(h^4) inside an even grid)."""
+    return derivative(t, y, 2)

@@ -1,0 +1,83 @@
+"""Torque plot of ``cog_id_torques``: one panel per active joint, effort against time.
+
+Matplotlib's object API on the Agg canvas: no pyplot, no display, no global backend
+switch, so it works on a headless machine and inside other programs.
+"""
+
+import numpy as np
+
+#: below this many samples the curve also shows the sample points
+_MARKER_LIMIT = 60
+
+
+def supported_formats():
+    """File extensions matplotlib can write (png, pdf, svg, ...)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
+def _fmt(value):
+    return f'{value:.4g}'
+
+
+def _quantity(unit):
+    """('torque', 'tau') for N m, ('force', 'F') for N."""
+    return ('force', 'F') if unit == 'N' else ('torque', '\u03c4')
+
+
+def plot_efforts(path, time, efforts, valid, joints, stats, title, units, subtitle=None,
+                 fmt='png'):
+    """Draw and save the effort plot.
+
+    ``time`` (N,), ``efforts`` (N, M), ``valid`` (N,) bool (False: skipped sample, drawn
+    as a gap with a red tick under it), ``joints`` M names, ``stats`` M dicts with
+    ``peak_effort``, ``peak_effort_signed``, ``peak_effort_time``, ``peak_effort_row``,
+    ``rms_effort`` (values ``None`` when no sample of the joint was solved), ``units``
+    M unit strings (``'N m'`` or ``'N'``), ``title`` the figure title (the mechanism
+    name), ``subtitle`` an optional second line. ``path`` may be a temporary name:
+    ``fmt`` says the format.
+    """
+    from matplotlib.figure import Figure
+
+    time = np.asarray(time, dtype=float)
+    efforts = np.asarray(efforts, dtype=float).reshape(time.size, -1)
+    valid = np.ones(time.size, bool) if valid is None else np.asarray(valid, bool)
+    n_joints = efforts.shape[1]
+    fig = Figure(figsize=(10.0, 1.3 + 2.7 * n_joints), layout='constrained')
+    axes = fig.subplots(n_joints, 1, sharex=True, squeeze=False)[:, 0]
+    skipped = ~valid
+    t_skipped = time[skipped]
+    marker = '.' if time.size <= _MARKER_LIMIT else None
+    for k, (ax, joint, st, unit) in enumerate(zip(axes, joints, stats, units)):
+        quantity, symbol = _quantity(unit)
+        curve = np.where(valid, efforts[:, k], np.nan)
+        ax.axhline(0.0, color='0.75', lw=0.8, zorder=0)
+        ax.plot(time, curve, color='C0', lw=1.4, marker=marker, ms=4,
+                label=f'{joint} {quantity}')
+        if st.get('peak_effort') is not None:
+            ax.plot([st['peak_effort_time']], [st['peak_effort_signed']], 'o', color='C3',
+                    ms=7, mfc='none', mew=1.8,
+                    label=f"peak |{symbol}| = {_fmt(st['peak_effort'])} {unit}  "
+                          f"(t = {_fmt(st['peak_effort_time'])} s, row {st['peak_effort_row']})")
+            rms = st['rms_effort']
+            ax.axhline(rms, color='C2', ls='--', lw=1.0,
+                       label=f'RMS = {_fmt(rms)} {unit}  (dashed: \u00b1RMS)')
+            ax.axhline(-rms, color='C2', ls='--', lw=1.0)
+        if t_skipped.size:
+            ax.plot(t_skipped, np.zeros_like(t_skipped), '|', color='red', ms=12, mew=1.2,
+                    transform=ax.get_xaxis_transform(), clip_on=False,
+                    label=f'skipped rows ({t_skipped.size}): not solved')
+        ax.set_ylabel(f'{quantity}  [{unit}]')
+        ax.grid(True, color='0.9', lw=0.6)
+        ax.legend(loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize='small',
+                  frameon=False, borderaxespad=0.0)
+        ax.set_title(f'{joint}', loc='left', fontsize='medium', fontweight='bold')
+    axes[-1].set_xlabel('time  [s]')
+    if time.size:
+        axes[-1].set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
+    kinds = sorted({_quantity(u)[0] for u in units})
+    head = f"{title}: actuator {' and '.join(k + 's' for k in kinds)}"
+    if subtitle:
+        head += '\n' + subtitle
+    fig.suptitle(head, fontsize='large')
+    fig.savefig(path, format=fmt, dpi=110)
