@@ -52,7 +52,7 @@ def test_cog_jacobian_is_the_derivative_of_the_cog_pose(case):
     s, law = case
     t = np.linspace(0.0, 1.0, 21)
     q, qd, _ = trajectory(law, t)
-    h = 1e-6
+    h = 1e-5     # positions are exact to the closure tolerance (1e-10): keep h well above it
     p_plus, r_plus = s.cog_poses(np.array(law(t + h)).T)
     p_minus, r_minus = s.cog_poses(np.array(law(t - h)).T)
     v_fd = (p_plus - p_minus) / (2 * h)
@@ -60,8 +60,8 @@ def test_cog_jacobian_is_the_derivative_of_the_cog_pose(case):
     g = s.cog_jacobians(q)
     moved = np.einsum('nlrm,nm->nlr', g, qd)
     scale = 1.0 + np.max(np.abs(moved))
-    assert np.max(np.abs(moved[..., :3] - v_fd)) < 1e-6 * scale
-    assert np.max(np.abs(moved[..., 3:] - w_fd)) < 1e-6 * scale
+    assert np.max(np.abs(moved[..., :3] - v_fd)) < 1e-4 * scale
+    assert np.max(np.abs(moved[..., 3:] - w_fd)) < 1e-4 * scale
 
 
 def test_drift_is_the_derivative_of_the_jacobian_along_the_motion(case):
@@ -69,11 +69,11 @@ def test_drift_is_the_derivative_of_the_jacobian_along_the_motion(case):
     s, law = case
     t = np.linspace(0.0, 1.0, 21)
     q, qd, _ = trajectory(law, t)
-    h = 1e-6
+    h = 1e-5
     g_dot = (s.cog_jacobians(np.array(law(t + h)).T) - s.cog_jacobians(np.array(law(t - h)).T)) / (2 * h)
     expected = np.einsum('nlrm,nm->nlr', g_dot, qd)
     drift = s.cog_drifts(q, qd)
-    assert np.max(np.abs(drift - expected)) < 1e-5 * (1.0 + np.max(np.abs(expected)))
+    assert np.max(np.abs(drift - expected)) < 1e-4 * (1.0 + np.max(np.abs(expected)))
 
 
 def test_power_of_the_torques_is_the_rate_of_energy(case):

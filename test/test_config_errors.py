@@ -103,3 +103,16 @@ def test_node_entry_overrides_the_wildcard(tmp_path):
     path.write_text(text + '\ncog_id_node:\n  ros__parameters:\n    mechanism:\n      name: renamed\n')
     assert cog_id_ros.Mechanism.from_params_file(str(path)).name == 'renamed'
     assert cog_id_ros.Mechanism.from_params_file(str(path), node_name='other').name == 'paper_four_bar_a'
+
+
+def test_assembly_holds_the_actuators_at_their_initial_positions():
+    from mechanisms import four_bar
+    # a rough guess of the passive joints: assembly closes the loop around joint1 = 0.8
+    mech = cog_id_ros.Mechanism.from_parameters(
+        four_bar(ground=0.6, crank=0.2, coupler=0.6, rocker=0.4, active=('joint1',),
+                 init=[0.8, -0.4, 1.5, 0.4]))
+    assert mech.assembled_positions[0] == 0.8
+    # rounded, slightly inconsistent redundant initial positions still assemble
+    rounded = with_changes(from_yaml('config/paper_four_bar_b.yaml'),
+                           mechanism__initial_positions=[1.5708, -1.5708, 1.5707, 1.5708])
+    assert cog_id_ros.Mechanism.from_parameters(rounded).dof == 1

@@ -145,13 +145,15 @@ def closure_jacobian_matrix(model, q):
     return matrix, sol
 
 
-def assemble(model, q, tol, max_iter=100, max_step=0.2):
-    """Close every loop from ``q`` moving all coordinates (minimum-norm Gauss-Newton steps).
+def assemble(model, q, tol, fixed=(), max_iter=100, max_step=0.2):
+    """Close every loop from ``q`` moving every coordinate but ``fixed`` (minimum-norm
+    Gauss-Newton steps).
 
-    Load time only (numpy least squares on the full, column-rank-deficient Jacobian).
+    Load time only (numpy least squares on the column-rank-deficient Jacobian).
     Returns (q, residual, converged).
     """
     q = [float(x) for x in q]
+    moving = np.array([j not in set(fixed) for j in range(model.n_joints)])
     residual = 0.0
     for _ in range(max_iter):
         matrix, sol = closure_jacobian_matrix(model, q)
@@ -159,7 +161,8 @@ def assemble(model, q, tol, max_iter=100, max_step=0.2):
         if _closed(sol, tol):
             return q, residual, True
         phi = np.array([r for st in sol.loops for r in st.residual])
-        step = np.linalg.lstsq(matrix, phi, rcond=1e-12)[0]
+        step = np.zeros(model.n_joints)
+        step[moving] = np.linalg.lstsq(matrix[:, moving], phi, rcond=1e-12)[0]
         size = np.max(np.abs(step))
         if not np.isfinite(size):
             break

@@ -162,7 +162,14 @@ class Mechanism:
     # --- analysis at load ------------------------------------------------------------------
 
     def _assemble(self):
-        q, residual, ok = closure.assemble(self.model, self.initial_positions, self.closure_tolerance)
+        """Close the loops with the actuators held at their initial positions; failing that
+        (e.g. rounded redundant initial positions), let every joint move."""
+        held = [self.joints.index(name) for name in self.active_joints]
+        q, residual, ok = closure.assemble(self.model, self.initial_positions,
+                                           self.closure_tolerance, fixed=held)
+        if not ok:
+            q, residual, ok = closure.assemble(self.model, self.initial_positions,
+                                               self.closure_tolerance)
         if not ok:
             raise MechanismConfigError(
                 'mechanism.initial_positions',
