@@ -127,6 +127,10 @@ class InverseDynamics:
         Raises ClosureError, SingularConfigurationError or SetpointError for the first sample
         that cannot be served (``.sample`` is its index); the warm start is then unchanged.
         """
+        sample = self._one_sample(q, qd, qdd)
+        if sample is not None:                       # the control-rate path: plain floats
+            step = self._solve_serial(sample[0])
+            return np.array(self._torques(step, sample[1], sample[2], sp.ScalarOps))
         q, qd, qdd, single = self._inputs(q, qd, qdd)
         if single:
             step = self._solve_serial(q[0].tolist())
@@ -249,6 +253,26 @@ class InverseDynamics:
                     f'{label}: expected shape {expected} (active joints {names}), got {array.shape}')
             out.append(array.reshape(1, -1) if single else array)
         return out[0], out[1], out[2], single
+
+    def _one_sample(self, q, qd, qdd):
+        """(q, qd, qdd) as lists of finite floats when they are one well-formed sample, else
+        None (the general path then reports what is wrong)."""
+        m = len(self.mechanism.active_joints)
+        out = []
+        for value in (q, qd, qdd):
+            if value is None:
+                out.append([0.0] * m)
+                continue
+            if getattr(value, 'ndim', 1) != 1:
+                return None
+            try:
+                floats = [float(x) for x in value]
+            except (TypeError, ValueError):
+                return None
+            if len(floats) != m or not all(map(math.isfinite, floats)):
+                return None
+            out.append(floats)
+        return out
 
     def _check_finite(self, q, qd, qdd, single):
         """SetpointError for the first non-finite entry; else None. Per sample: a bool array."""
