@@ -133,21 +133,19 @@ def vec_combination(v0, v1, s1, v2, s2):
             v0[2] + v1[2] * s1 + v2[2] * s2)
 
 
-def column(r, k):
-    return (r[k], r[3 + k], r[6 + k])
-
-
 def orientation_error(ra, rb):
-    """Rotation of frame b relative to frame a, as a base-frame vector: 1/2 sum_k a_k x b_k.
+    """Rotation of frame b relative to frame a, as a base-frame vector: 1/2 sum_k a_k x b_k
+    (a_k, b_k the columns of the two rotation matrices).
 
     Zero when the frames coincide; its time derivative there is w_b - w_a, so it pairs with
     the angular rows of the closure Jacobian in Newton's method (it also vanishes for a
     half-turn, which the closure solver rules out by checking ``rotation_cosine``).
     """
-    e = ZERO3
-    for k in range(3):
-        e = add(e, cross(column(ra, k), column(rb, k)))
-    return scale(e, 0.5)
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = ra
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = rb
+    return ((a3 * b6 - a6 * b3 + a4 * b7 - a7 * b4 + a5 * b8 - a8 * b5) * 0.5,
+            (a6 * b0 - a0 * b6 + a7 * b1 - a1 * b7 + a8 * b2 - a2 * b8) * 0.5,
+            (a0 * b3 - a3 * b0 + a1 * b4 - a4 * b1 + a2 * b5 - a5 * b2) * 0.5)
 
 
 def rotation_cosine(ra, rb):
@@ -182,21 +180,28 @@ def rotation_about(axis_unit, angle, ops=ScalarOps):
 
 def twist_add_scaled(t, u, s):
     """t + s u for twists."""
-    return (add_scaled(t[0], u[0], s), add_scaled(t[1], u[1], s))
+    (w0, w1, w2), (v0, v1, v2) = t
+    (x0, x1, x2), (y0, y1, y2) = u
+    return ((w0 + x0 * s, w1 + x1 * s, w2 + x2 * s), (v0 + y0 * s, v1 + y1 * s, v2 + y2 * s))
 
 
 def twist_at(t, x):
     """Twist t as (velocity of the body point at x, angular velocity)."""
-    w, v0 = t
-    return (add(v0, cross(w, x)), w)
+    w, v = t
+    return ((v[0] + w[1] * x[2] - w[2] * x[1],
+             v[1] + w[2] * x[0] - w[0] * x[2],
+             v[2] + w[0] * x[1] - w[1] * x[0]), w)
 
 
 def motion_cross(t, u):
     """Spatial cross product t x u of two twists: the rate of change of a twist u
-    fixed in a body that moves with twist t."""
-    w, v0 = t
-    wu, vu = u
-    return (cross(w, wu), add(cross(w, vu), cross(v0, wu)))
+    fixed in a body that moves with twist t: (w x wu, w x vu + v x wu)."""
+    (w0, w1, w2), (v0, v1, v2) = t
+    (a0, a1, a2), (b0, b1, b2) = u
+    return ((w1 * a2 - w2 * a1, w2 * a0 - w0 * a2, w0 * a1 - w1 * a0),
+            (w1 * b2 - w2 * b1 + v1 * a2 - v2 * a1,
+             w2 * b0 - w0 * b2 + v2 * a0 - v0 * a2,
+             w0 * b1 - w1 * b0 + v0 * a1 - v1 * a0))
 
 
 ZERO_TWIST = (ZERO3, ZERO3)
