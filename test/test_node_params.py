@@ -1,0 +1,115 @@
+"""cog_id_node start-up: parameter files it cannot honour, and ones it must accept.
+
+A bad file ends the process with exit status 2 and one line naming the parameter; a good
+one starts the node, which exits with status 0 on SIGINT or SIGTERM.
+"""
+import signal
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+pytest.importorskip('rclpy')
+
+from conftest import BIN  # noqa: E402
+
+CONFIG_A = 'config/paper_four_bar_a.yaml'
+
+
+def params_file(tmp_path, edit, source=CONFIG_A):
+    """A copy of ``source`` with ``edit(ros__parameters dict)`` applied."""
+    with open(source, encoding='utf-8') as f:
+        doc = yaml.safe_load(f)
+    edit(doc['/**']['ros__parameters'])
+    path = tmp_path / 'params.yaml'
+    path.write_text(yaml.safe_dump(doc))
+    return str(path)
+
+
+def run_node(ros_env, *ros_args, timeout=60):
+    return subprocess.run([f'{BIN}/cog_id_node', '--ros-args', *ros_args], env=ros_env,
+                          stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def _set(path, value):
+    def edit(p):
+        node = p
+        *head, last = path.split('.')
+        for key in head:
+            node = node[key]
+        node[last] = value
+    return edit
+
+
+def _drop(path):
+    def edit(p):
+        node = p
+        *head, last = path.split('.')
+        for key in head:
+            node = node[key]
+        del node[last]
+    return edit
+
+
+BAD_FILES = {
+    'negative mass': (_set('links.link2.mass', -1.0), 'links.link2.mass', 'must be >= 0'),
+    'unknown active joint': (_set('mechanism.active_joints', ['joint9']),
+                             'mechanism.active_joints', 'joint9'),
+    'com of wrong length': (_set('links.link1.com', [0.25, 0.0]), 'links.link1.com', None),
+    'unknown joint type': (_set('joints.joint2.type', 'helical'), 'joints.joint2.type', 'helical'),
+    'zero axis': (_set('joints.joint1.axis', [0.0, 0.0, 0.0]), 'joints.joint1.axis', None),
+    'missing joint entry': (_drop('joints.joint4'), 'joints.joint4', None),
+    'effort_limits of wrong length': (_set('effort_limits', [1.0, 2.0]), 'effort_limits', None),
+    'unknown timeout_behavior': (_set('timeout_behavior', 'brake'), 'timeout_behavior', 'brake'),
+    'negative setpoint_timeout': (_set('setpoint_timeout', -1.0), 'setpoint_timeout', None),
+}
+
+
+@pytest.mark.parametrize('case', list(BAD_FILES))
+def test_bad_parameter_file_exits_with_one_line_naming_the_parameter(case, tmp_path, ros_env):
+    edit, parameter, detail = BAD_FILES[case]
+    result = run_node(ros_env, '--params-file', params_file(tmp_path, edit))
+    assert result.returncode == 2, result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert parameter in lines[0]
+    if detail:
+        assert detail in lines[0]
+
+
+def test_integer_arrays_are_accepted_and_sigterm_exits_cleanly(tmp_path, ros_env):
+    """[0, 0, 1] where doubles are meant is fine; -p overrides work too; python -m starts it."""
+    def edit(p):
+        for joint in p['joints'].values():
+            joint['axis'] = [0, 0, 1]
+        p['links']['link1']['com'] = [0, 0, 0]
+    args = [sys.executable, '-m', 'cog_id_ros.node', '--ros-args', '--params-file',
+            params_file(tmp_path, edit), '-p', 'links.link3.mass:=2', '-r', '__ns:=/ints']
+    proc = subprocess.Popen(args, env=ros_env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        first = proc.stdout.readline()
+        assert "mechanism 'paper_four_bar_a'" in first, first
+        assert '/ints' in first or 'ints.cog_id_node' in first
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, out
+    assert 'Traceback' not in out
+
+
+def test_unknown_node_parameter_is_a_warning_not_an_error(tmp_path, ros_env):
+    proc = subprocess.Popen([f'{BIN}/cog_id_node', '--ros-args', '--params-file', CONFIG_A,
+                             '-p', 'setpoint_timout:=1.0', '-r', '__ns:=/typo'],
+                            env=ros_env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = [proc.stdout.readline(), proc.stdout.readline()]
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, out
+    assert "ignoring unknown parameter 'setpoint_timout'" in lines[0]
+    assert "mechanism 'paper_four_bar_a'" in lines[1]
