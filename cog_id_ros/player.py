@@ -1,0 +1,224 @@
+"""cog_id_player: play a CSV trajectory into ``joint_setpoint``; optionally record ``joint_effort``.
+
+    cog_id_player --input motion.csv [--rate 1000] [--output efforts.csv] [--ros-args -r __ns:=/arm]
+
+The CSV is the one of the offline tool ``cog_id_torques``: a ``time`` column (seconds,
+strictly increasing) and ``<joint>.position`` per joint, optionally ``<joint>.velocity``
+(other columns are ignored). Every ``<joint>.position`` column becomes a joint of the
+setpoints, so the player works with any mechanism.
+
+Timing: setpoint ``i`` is published at ``start + (time[i] - time[0])`` on the wall clock and
+stamped with exactly that time, so the stamps say when each setpoint is meant for and the
+node's acceleration estimator sees the trajectory's own time steps, whatever the jitter of
+the publishing loop. ``--rate`` resamples the trajectory first (cubic spline through the
+positions, and through the velocities when the file has them).
+
+``--output`` records ``joint_effort`` (matched to the setpoints by stamp) to a CSV of the
+offline tool's output format: ``time`` and ``<joint>.effort``, an empty cell where no
+effort came back (a rejected setpoint).
+"""
+import argparse
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+from . import trajectory_io
+from .node import control_qos
+from .ros_conversions import NANOSECONDS, stamp_to_ns
+
+#: the recorder must not drop what the node sends while the player is busy publishing
+RECORDER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
+                          reliability=ReliabilityPolicy.RELIABLE)
+
+
+class Player(Node):
+    """Publishes setpoints on a schedule and records the efforts that come back.
+
+    ``joints``: names of the setpoints' joints; ``topic``: where setpoints go (relative
+    names follow the node's namespace); ``collect``: the JointState topic to record
+    (``None``: record nothing).
+    """
+
+    def __init__(self, joints, topic='joint_setpoint', collect='joint_effort',
+                 node_name='cog_id_player', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.joints = list(joints)
+        self.publisher = self.create_publisher(JointState, topic, control_qos())
+        self.received = {}     # stamp (ns) -> (names, positions, velocities, efforts)
+        self.subscription = None
+        if collect:
+            self.subscription = self.create_subscription(JointState, collect, self._on_effort,
+                                                         RECORDER_QOS)
+        self._spinner = SingleThreadedExecutor(context=self.context)
+        self._spinner.add_node(self)
+
+    def _on_effort(self, msg):
+        self.received[stamp_to_ns(msg.header.stamp)] = (
+            list(msg.name), list(msg.position), list(msg.velocity), list(msg.effort))
+
+    def spin_for(self, seconds):
+        """Handle incoming messages for ``seconds`` of wall time."""
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            self._spinner.spin_once(timeout_sec=left)
+
+    def wait_for_node(self, timeout=10.0):
+        """Wait until the setpoint topic has a subscriber (and the recorded one a publisher)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            ready = self.publisher.get_subscription_count() > 0
+            if self.subscription is not None:
+                ready = ready and self.count_publishers(self.subscription.topic_name) > 0
+            if ready:
+                self.spin_for(0.2)   # let the other side's discovery finish too
+                return True
+            self._spinner.spin_once(timeout_sec=0.02)
+        return False
+
+    def play(self, times, positions, velocities=None, start_ns=None, pace=1.0):
+        """Publish one setpoint per row at its time; returns the stamps (ns) used.
+
+        ``times`` (N,) seconds, ``positions`` and ``velocities`` (N, n_joints).
+        ``start_ns``: the stamp of the first row (default: now on the node's clock).
+        ``pace``: wall-clock seconds per trajectory second (2: half speed); the stamps
+        always follow ``times``.
+        """
+        times = np.asarray(times, dtype=float)
+        positions = np.asarray(positions, dtype=float)
+        velocities = None if velocities is None else np.asarray(velocities, dtype=float)
+        offsets = np.round((times - times[0]) * NANOSECONDS).astype(np.int64)
+        if start_ns is None:
+            start_ns = self.get_clock().now().nanoseconds
+        stamps = [start_ns + int(o) for o in offsets]
+        msg = JointState()
+        msg.name = self.joints
+        t0 = time.monotonic()
+        for i, stamp in enumerate(stamps):
+            due = t0 + pace * offsets[i] / NANOSECONDS
+            while (left := due - time.monotonic()) > 0:
+                self._spinner.spin_once(timeout_sec=left)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, NANOSECONDS)
+            msg.position = positions[i].tolist()
+            if velocities is not None:
+                msg.velocity = velocities[i].tolist()
+            self.publisher.publish(msg)
+        return stamps
+
+    def collect(self, stamps, timeout=2.0):
+        """Wait (up to ``timeout`` s) for the efforts of ``stamps``; returns them.
+
+        ``(names, efforts (N, M) with NaN rows where nothing came, found (N,) bool)``.
+        """
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not all(s in self.received for s in stamps[-1:]):
+            self._spinner.spin_once(timeout_sec=0.05)
+        self.spin_for(0.05)
+        found = np.array([s in self.received for s in stamps])
+        names = next((self.received[s][0] for s in stamps if s in self.received), [])
+        efforts = np.full((len(stamps), len(names)), np.nan)
+        for i, s in enumerate(stamps):
+            if s in self.received:
+                efforts[i] = self.received[s][3]
+        return names, efforts, found
+
+
+def joints_of(path):
+    """Joint names of a trajectory CSV: every ``<joint>.position`` column, in file order."""
+    with open(path, encoding='utf-8-sig') as f:
+        header = f.readline()
+    names = [c.strip().strip('"') for c in header.split(',')]
+    return [c[:-len('.position')] for c in names if c.endswith('.position')]
+
+
+def load_csv(path):
+    """(times, positions (N, J), velocities (N, J) or None, joints) of a trajectory CSV."""
+    joints = joints_of(path)
+    if not joints:
+        raise trajectory_io.TrajectoryError(path, 'no <joint>.position column', header=True)
+    traj = trajectory_io.read_trajectory(path, joints, joints)
+    for note in traj.notes:
+        print(f'cog_id_player: {note}', file=sys.stderr)
+    q = np.column_stack([traj.columns[f'{j}.position'] for j in joints])
+    has_v = [f'{j}.velocity' in traj.columns for j in joints]
+    qd = np.column_stack([traj.columns[f'{j}.velocity'] for j in joints]) if all(has_v) else None
+    return traj.time, q, qd, joints
+
+
+def resample(times, positions, velocities, rate):
+    """The trajectory at ``rate`` Hz from its first to its last time (cubic splines)."""
+    from scipy.interpolate import CubicSpline
+    new = times[0] + np.arange(int(np.floor((times[-1] - times[0]) * rate + 1e-9)) + 1) / rate
+    q = CubicSpline(times, positions, axis=0)(new)
+    qd = None if velocities is None else CubicSpline(times, velocities, axis=0)(new)
+    return new, q, qd
+
+
+def build_parser():
+    p = argparse.ArgumentParser(
+        prog='cog_id_player',
+        description='Play a CSV trajectory into joint_setpoint (sensor_msgs/JointState) and '
+                    'optionally record joint_effort. ROS arguments go after --ros-args.')
+    p.add_argument('--input', required=True, help='CSV: time, <joint>.position[, <joint>.velocity]')
+    p.add_argument('--rate', type=float, help='resample to this many setpoints per second '
+                   '(default: the rows as they are)')
+    p.add_argument('--topic', default='joint_setpoint', help='setpoint topic (default %(default)s)')
+    p.add_argument('--no-velocity', action='store_true', help='do not send the velocity columns')
+    p.add_argument('--output', help='record joint_effort to this CSV (time, <joint>.effort)')
+    p.add_argument('--effort-topic', default='joint_effort', help='default %(default)s')
+    p.add_argument('--wait', type=float, default=10.0,
+                   help='seconds to wait for the node to appear (default %(default)s)')
+    return p
+
+
+def main(argv=None):
+    argv = sys.argv if argv is None else argv
+    cli_args = rclpy.utilities.remove_ros_args(argv)[1:]
+    args = build_parser().parse_args(cli_args)
+    if args.rate is not None and not args.rate > 0:
+        print('cog_id_player: --rate must be > 0', file=sys.stderr)
+        return 2
+    try:
+        times, q, qd, joints = load_csv(args.input)
+    except (OSError, ValueError) as exc:
+        print(f'cog_id_player: {exc}', file=sys.stderr)
+        return 2
+    if args.no_velocity:
+        qd = None
+    if args.rate:
+        times, q, qd = resample(times, q, qd, args.rate)
+    rclpy.init(args=argv)
+    player = Player(joints, args.topic, args.effort_topic if args.output else None)
+    try:
+        if not player.wait_for_node(args.wait):
+            print(f'cog_id_player: nothing subscribes to {player.publisher.topic_name} '
+                  f'after {args.wait:g} s (is cog_id_node running, in this namespace and '
+                  'ROS_DOMAIN_ID?)', file=sys.stderr)
+            return 1
+        print(f'cog_id_player: playing {len(times)} setpoints of {", ".join(joints)} over '
+              f'{times[-1] - times[0]:.3f} s into {player.publisher.topic_name}', file=sys.stderr)
+        stamps = player.play(times, q, qd)
+        if args.output:
+            names, efforts, found = player.collect(stamps)
+            if not found.any():
+                print(f'cog_id_player: no effort came back on {args.effort_topic}',
+                      file=sys.stderr)
+                return 1
+            trajectory_io.write_efforts(args.output, times, efforts, found, names)
+            print(f'cog_id_player: {int(found.sum())} of {len(stamps)} efforts recorded to '
+                  f'{args.output}', file=sys.stderr)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        player.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
