@@ -24,6 +24,7 @@ from .joint_motion import (active_velocity_map, closure_drift, combine, projecti
 from .kinematics import link_bias_accelerations, link_twists
 from .lane_linalg import solve_spd
 from .newton_euler import newton_euler_force, rotated_inertia_times
+from .sample_program import SampleProgram
 
 
 def active_torques(jacobians, forces):
@@ -110,6 +111,7 @@ class InverseDynamics:
 
     def __init__(self, mechanism):
         self.mechanism = mechanism
+        self._program = _sample_program(self)
         self.reset()
 
     def reset(self):
@@ -129,6 +131,9 @@ class InverseDynamics:
         """
         sample = self._one_sample(q, qd, qdd)
         if sample is not None:                       # the control-rate path: plain floats
+            done = self._program_serial(*sample)      # straight-line code (sample_program.py)
+            if done is not None:
+                return np.array(done)
             step = self._solve_serial(sample[0])
             return np.array(self._torques(step, sample[1], sample[2], sp.ScalarOps))
         q, qd, qdd, single = self._inputs(q, qd, qdd)
@@ -226,6 +231,10 @@ class InverseDynamics:
         s, cogs, jac = self._cog_jacobians(step, ops)
         return active_torques(jac, self._drift_forces(step, s, cogs, jac, qd, ops, qdd))
 
+    def _pipeline(self, sol, basis, condition, qd, qdd, ops):
+        """Eqs. (1)-(7) at a closure solution (what sample_program.py traces)."""
+        return self._torques(_Step(sol, basis, 0.0, condition), qd, qdd, ops)
+
     # --- inputs ---------------------------------------------------------------------------
 
     def _inputs(self, q, qd, qdd):
@@ -263,12 +272,17 @@ class InverseDynamics:
             if value is None:
                 out.append([0.0] * m)
                 continue
-            if getattr(value, 'ndim', 1) != 1:
-                return None
-            try:
-                floats = [float(x) for x in value]
-            except (TypeError, ValueError):
-                return None
+            if type(value) is np.ndarray:            # a row of a float array: one C call
+                if value.ndim != 1 or value.dtype.kind != 'f':
+                    return None
+                floats = value.tolist()
+            else:
+                if getattr(value, 'ndim', 1) != 1:
+                    return None
+                try:
+                    floats = [float(x) for x in value]
+                except (TypeError, ValueError):
+                    return None
             if len(floats) != m or not all(map(math.isfinite, floats)):
                 return None
             out.append(floats)
@@ -308,6 +322,36 @@ class InverseDynamics:
             q, basis = step.sol.q, step.basis
         self._state = (q, basis)
         return step
+
+    def _program_serial(self, target, qd, qdd):
+        """_solve_serial and the torques by the straight-line code, through the same
+        continuation steps; None (and the state unchanged) when it cannot serve a step."""
+        if self._program is None:
+            return None
+        m = self.mechanism
+        state = self._state
+        start = [state[0][j] for j in m.active_index]
+        distance = max(abs(t - s) for t, s in zip(target, start))
+        if not distance < math.inf:
+            return None
+        n_steps = max(1, math.ceil(distance / self.continuation_step - 1e-9))
+        for k in range(1, n_steps + 1):
+            goal = target if k == n_steps else \
+                [s + (t - s) * (k / n_steps) for s, t in zip(start, target)]
+            done = self._program.torques(state, goal, qd, qdd)
+            if done is None:
+                return None
+            state = done[1]
+        self._state = state
+        return done[0]
+
+    def _serial_positions(self, target, sample):
+        """Every joint coordinate at one sample (as _solve_serial.sol.q), by the straight-line
+        code when it can serve the sample."""
+        zeros = [0.0] * len(target)
+        if self._program_serial(target, zeros, zeros) is not None:
+            return self._state[0]
+        return self._solve_serial(target, sample=sample).sol.q
 
     def _closure_step(self, q, basis, target, ops):
         """Close the loops with the primary actuators at ``target``, from ``q`` advanced by the
@@ -389,7 +433,7 @@ class InverseDynamics:
         anchor_q, failed = {}, set()
         for a in anchors:
             try:
-                anchor_q[a] = self._solve_serial(qa[a].tolist(), sample=int(a)).sol.q
+                anchor_q[a] = self._serial_positions(qa[a].tolist(), int(a))
             except CogIdError:
                 failed.add(a)
         # interpolated start of every sample between its neighbouring anchors (by travel)
@@ -529,6 +573,18 @@ class InverseDynamics:
             step = self._solve_batch(q, 'raise')[0]
             extra = ([qd[:, a] for a in range(qd.shape[1])],) if with_rates else ()
             return tuple(_stack(x, len(q)) for x in compute(step, sp.ArrayOps, *extra))
+
+
+def _sample_program(solver):
+    """The mechanism's straight-line per-sample code, traced once and shared by its solvers;
+    None for redundant actuation (its projection is iterative: the general path serves it)."""
+    m = solver.mechanism
+    if m.is_redundant:
+        return None
+    program = getattr(m, '_sample_program', None)
+    if program is None:
+        program = m._sample_program = SampleProgram(m, solver._pipeline)
+    return program
 
 
 def _stack(nested, n):

@@ -1,0 +1,110 @@
+"""The control-rate path: one sample of one mechanism as two straight-line functions.
+
+``InverseDynamics.torques`` on one sample does, on Python floats: a first-order predictor
+from the previous solution, Newton steps on the loop equations, then eqs. (1)-(7) at the
+closed configuration. The lane code of those steps is traced once per mechanism
+(straight_line.py) into
+
+    newton(q, qd, qdd) -> closure residual, cosines of the loop frames, Newton step
+    full(q, qd, qdd)   -> the same, then condition number, torques, velocity basis
+
+and this module strings them together exactly as the general path does (same predictor,
+same step limit, same checks), so the torques agree with it to the last bit. Anything out
+of the ordinary (Newton not converging in a few steps, a singular or unclosable pose)
+returns None and the general path, which raises the right error, takes over from the same
+state.
+
+Redundantly actuated mechanisms keep the general path (their projection is iterative).
+"""
+import math
+
+from . import closure
+from .joint_motion import velocity_basis
+from .straight_line import Graph, SymOps, compile_function
+
+#: Newton steps tried here before handing over to the general path
+MAX_NEWTON_STEPS = 4
+
+
+class SampleProgram:
+    """newton() and full() of one non-redundant mechanism, and the glue between them.
+
+    ``pipeline(sol, basis, condition, qd, qdd, ops)`` is the solver's eqs. (1)-(7) at a
+    closure solution (InverseDynamics builds it); it is traced, never called on floats.
+    """
+
+    def __init__(self, mechanism, pipeline, max_step=0.5):
+        m = self.mechanism = mechanism
+        self.max_step = max_step
+        n_joints, n_act = len(m.joints), len(m.active_joints)
+        graph = Graph()
+        q = graph.inputs('q', n_joints)
+        sol = closure.evaluate(m.model, q, m.free_joints, SymOps)
+        residual = [r for st in sol.loops for r in st.residual]
+        cosines = [st.cosine for st in sol.loops]
+        closure_outputs = residual + cosines + sol.lsq.solve(residual)
+        self.n_residual, self.n_loops = len(residual), len(cosines)
+        self.n_closure = len(closure_outputs)
+        qd, qdd = graph.inputs('qd', n_act), graph.inputs('qdd', n_act)
+        params = [('q', q), ('qd', qd), ('qdd', qdd)]
+        self.newton, _, newton_ops = compile_function('newton', params, closure_outputs)
+
+        basis = velocity_basis(m, sol)
+        condition = sol.lsq.condition_number()
+        tau = pipeline(sol, basis, condition, qd, qdd, SymOps)
+        free_rows = [x for j in m.free_joints for x in basis[j]]
+        self.full, self.source, full_ops = compile_function(
+            'full', params, closure_outputs + [condition] + list(tau) + free_rows)
+        self.operations = (newton_ops, full_ops)
+        # the velocity basis rows of the primary actuators are constant unit rows
+        self._unit_rows = {j: [1.0 if i == k else 0.0 for i in range(m.dof)]
+                           for k, j in enumerate(m.primary_joints)}
+
+    def torques(self, state, target, qd, qdd):
+        """(torques, new state, closure residual, condition number) for one sample from
+        ``state`` = (q, basis), at most one continuation step away; None when the general
+        path must decide (slow convergence, a singular or unclosable pose)."""
+        m = self.mechanism
+        q, basis = state
+        dz = [target[a] - q[j] for a, j in zip(m.primary, m.primary_joints)]
+        if len(dz) == 1:     # the same sums as the general path, without a generator each
+            d = dz[0]
+            q = [x + row[0] * d for x, row in zip(q, basis)]
+        else:
+            q = [x + sum(b * d for b, d in zip(row, dz)) for x, row in zip(q, basis)]
+        for a, j in zip(m.primary, m.primary_joints):
+            q[j] = target[a]
+        tol, nr, nl, nc = m.closure_tolerance, self.n_residual, self.n_loops, self.n_closure
+        free = m.free_joints
+        evaluate = self.newton       # closure only, until the configuration is closed
+        for _ in range(MAX_NEWTON_STEPS + 2):
+            out = evaluate(q, qd, qdd)
+            residual = max(map(abs, out[:nr])) if nr else 0.0
+            if residual < tol and (not nl or min(out[nr:nr + nl]) > 0.0):
+                if evaluate is self.full:
+                    break
+                evaluate = self.full    # closed where the predictor put it: evaluate all there
+                continue
+            step = out[nr + nl:nc]
+            size = max(map(abs, step))
+            if not size < math.inf or size < 1e-15 * (1.0 + max(map(abs, q))):
+                return None
+            factor = min(1.0, self.max_step / size)
+            for k, j in enumerate(free):
+                q[j] = q[j] - step[k] * factor
+            evaluate = self.full        # most likely closed after this step: evaluate all
+        else:
+            return None
+        condition = out[nc]
+        n_act = len(m.active_joints)
+        tau = out[nc + 1:nc + 1 + n_act]
+        if not (condition <= m.max_condition_number and all(map(math.isfinite, tau))):
+            return None
+        rows = out[nc + 1 + n_act:]
+        dof = m.dof
+        new_basis = [None] * len(q)
+        for j, row in self._unit_rows.items():
+            new_basis[j] = row
+        for i, j in enumerate(free):
+            new_basis[j] = list(rows[i * dof:(i + 1) * dof])
+        return tau, (q, new_basis), residual, condition

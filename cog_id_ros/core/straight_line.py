@@ -1,0 +1,239 @@
+"""Straight-line code for one sample: the lane pipeline traced once per mechanism.
+
+The per-sample path runs the lane code of spatial.py and friends on Python floats, and
+Python charges for every call, tuple and multiplication by a constant zero a planar
+mechanism written in 3-D is full of. Here the same code runs once, at load time, on
+*symbolic* lanes (``Sym``) that record the float operations instead of doing them:
+
+* constants fold (``0 * x``, ``1 * x``, ``x + 0``, products of numbers) as they are met;
+* equal operations on equal operands are recorded once (common subexpressions);
+* operations no output depends on are dropped;
+
+and ``compile_function`` writes what is left as one Python function of plain float
+statements. The operations that remain are those the float path would do, in the same
+order, so the results agree with it to the last bit (up to the sign of a zero).
+
+Only branch-free lane code can be traced: a comparison of a ``Sym`` raises TypeError.
+"""
+import math
+
+#: ScalarOps.sqrt and .recip as expressions ({0}: the operand)
+_UNARY = {
+    'neg': '-{0}',
+    'sin': 'sin({0})',
+    'cos': 'cos({0})',
+    'sqrt': '(sqrt({0}) if {0} >= 0.0 else nan)',
+    'recip': '(1.0 / {0} if {0} != 0.0 else inf)',
+    'abs': 'abs({0})',
+}
+_BINARY = {'add': '{0} + {1}', 'sub': '{0} - {1}', 'mul': '{0} * {1}', 'div': '{0} / {1}'}
+
+
+class Graph:
+    """The recorded operations: node k is (op, operands); operands are node ids or floats."""
+
+    def __init__(self):
+        self.nodes = []
+        self._index = {}
+
+    def node(self, op, args):
+        key = (op,) + tuple(a.k if isinstance(a, Sym) else ('c', a) for a in args)
+        sym = self._index.get(key)
+        if sym is None:
+            sym = self._index[key] = Sym(self, len(self.nodes))
+            self.nodes.append((op, tuple(a.k if isinstance(a, Sym) else a for a in args)))
+        return sym
+
+    def inputs(self, name, n):
+        """n symbolic inputs called name[0] .. name[n-1]."""
+        return [self.node('in', (f'{name}[{i}]',)) for i in range(n)]
+
+
+def _is_const(x):
+    return not isinstance(x, Sym)
+
+
+def _add(a, b):
+    if _is_const(a):
+        if _is_const(b):
+            return a + b
+        if a == 0:
+            return b
+        return b.graph.node('add', (float(a), b))
+    if _is_const(b) and b == 0:
+        return a
+    return a.graph.node('add', (a, b if isinstance(b, Sym) else float(b)))
+
+
+def _sub(a, b):
+    if _is_const(b):
+        if _is_const(a):
+            return a - b
+        if b == 0:
+            return a
+        return a.graph.node('sub', (a, float(b)))
+    if _is_const(a) and a == 0:
+        return _neg(b)
+    if a is b:
+        return 0.0
+    return b.graph.node('sub', (a if isinstance(a, Sym) else float(a), b))
+
+
+def _mul(a, b):
+    if _is_const(a):
+        if _is_const(b):
+            return a * b
+        a, b = b, a
+    if _is_const(b):
+        if b == 0:
+            return 0.0
+        if b == 1:
+            return a
+        if b == -1:
+            return _neg(a)
+        return a.graph.node('mul', (a, float(b)))
+    return a.graph.node('mul', (a, b))
+
+
+def _div(a, b):
+    if _is_const(b):
+        if _is_const(a):
+            return a / b
+        if b == 1:
+            return a
+        return a.graph.node('div', (a, float(b)))
+    if _is_const(a) and a == 0:
+        return 0.0
+    return b.graph.node('div', (a if isinstance(a, Sym) else float(a), b))
+
+
+def _neg(a):
+    if _is_const(a):
+        return -a
+    op, args = a.graph.nodes[a.k]
+    if op == 'neg':
+        return Sym(a.graph, args[0])
+    return a.graph.node('neg', (a,))
+
+
+class Sym:
+    """A symbolic lane: node ``k`` of ``graph``."""
+    __slots__ = ('graph', 'k')
+    __array_ufunc__ = None    # numpy scalars defer to the reflected operators below
+
+    def __init__(self, graph, k):
+        self.graph, self.k = graph, k
+
+    def __add__(self, other):
+        return _add(self, other)
+
+    def __radd__(self, other):
+        return _add(other, self)
+
+    def __sub__(self, other):
+        return _sub(self, other)
+
+    def __rsub__(self, other):
+        return _sub(other, self)
+
+    def __mul__(self, other):
+        return _mul(self, other)
+
+    def __rmul__(self, other):
+        return _mul(other, self)
+
+    def __truediv__(self, other):
+        return _div(self, other)
+
+    def __rtruediv__(self, other):
+        return _div(other, self)
+
+    def __neg__(self):
+        return _neg(self)
+
+    def __pos__(self):
+        return self
+
+    def __bool__(self):
+        raise TypeError('a symbolic lane has no truth value: only branch-free code can be traced')
+
+    def _compare(self, other):
+        self.__bool__()
+
+    __lt__ = __le__ = __gt__ = __ge__ = _compare
+
+
+def _unary(op, fold):
+    def apply(x):
+        return fold(x) if _is_const(x) else x.graph.node(op, (x,))
+    return staticmethod(apply)
+
+
+class SymOps:
+    """Lane functions for symbolic lanes (the counterpart of spatial.ScalarOps)."""
+    sin = _unary('sin', math.sin)
+    cos = _unary('cos', math.cos)
+    sqrt = _unary('sqrt', lambda x: math.sqrt(x) if x >= 0.0 else math.nan)
+    recip = _unary('recip', lambda x: 1.0 / x if x != 0.0 else math.inf)
+
+    @staticmethod
+    def maxabs(lanes):
+        """Not traced: the largest |lane| is a comparison; callers take it from the outputs."""
+        return math.nan
+
+
+def _literal(x):
+    x = float(x)
+    if math.isnan(x):
+        return 'nan'
+    if math.isinf(x):
+        return 'inf' if x > 0 else '-inf'
+    text = repr(x)
+    return f'({text})' if x < 0 or text.startswith('-') else text
+
+
+def compile_function(name, params, outputs):
+    """A Python function ``name(*params)`` returning the flat tuple ``outputs``.
+
+    params: list of (parameter name, list of input Syms made by ``graph.inputs``) -- each
+    parameter is a sequence unpacked into its inputs; outputs: flat list of Syms or floats.
+    Returns (function, source, number of operations).
+    """
+    graph = next((o.graph for o in outputs if isinstance(o, Sym)), None)
+    if graph is None:
+        graph = next((s.graph for _, syms in params for s in syms), Graph())
+    live = [False] * len(graph.nodes)
+    for o in outputs:
+        if isinstance(o, Sym):
+            live[o.k] = True
+    for k in range(len(graph.nodes) - 1, -1, -1):
+        if live[k]:
+            for a in graph.nodes[k][1]:
+                if isinstance(a, int):
+                    live[a] = True
+    names = {}
+    lines = [f'def {name}({", ".join(p for p, _ in params)}):']
+    for p, syms in params:
+        for i, s in enumerate(syms):
+            names[s.k] = f'{p}_{i}'
+        if syms:
+            lines.append(f'    {", ".join(names[s.k] for s in syms)}{"," if len(syms) == 1 else ""}'
+                         f' = {p}')
+
+    def operand(a):
+        return names[a] if isinstance(a, int) else _literal(a)
+
+    count = 0
+    for k, (op, args) in enumerate(graph.nodes):
+        if not live[k] or op == 'in':
+            continue
+        names[k] = f't{k}'
+        template = _UNARY.get(op) or _BINARY[op]
+        lines.append(f'    t{k} = {template.format(*map(operand, args))}')
+        count += 1
+    lines.append(f'    return ({"".join(operand(o.k if isinstance(o, Sym) else o) + ", " for o in outputs)})')
+    source = '\n'.join(lines) + '\n'
+    namespace = {'sin': math.sin, 'cos': math.cos, 'sqrt': math.sqrt,
+                 'inf': math.inf, 'nan': math.nan}
+    exec(compile(source, f'<straight_line {name}>', 'exec'), namespace)   # noqa: S102
+    return namespace[name], source, count
