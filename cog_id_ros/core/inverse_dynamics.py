@@ -307,37 +307,39 @@ class InverseDynamics:
 
     def _solve_serial(self, target, sample=None):
         """Solve one sample from the warm start, in continuation steps if it is far away."""
-        m = self.mechanism
         q, basis = self._state
-        start = [q[j] for j in m.active_index]
-        distance = max(abs(t - s) for t, s in zip(target, start))
-        if not distance < math.inf:
+        goals = self._continuation_goals(target)
+        if goals is None:
             raise SetpointError('setpoints must be finite', sample=sample)
-        n_steps = max(1, math.ceil(distance / self.continuation_step - 1e-9))
-        for k in range(1, n_steps + 1):
-            goal = target if k == n_steps else \
-                [s + (t - s) * (k / n_steps) for s, t in zip(start, target)]
+        for k, goal in enumerate(goals, 1):
             step = self._closure_step(q, basis, goal, sp.ScalarOps)
-            self._check(step, k == n_steps, sample)
+            self._check(step, k == len(goals), sample)
             q, basis = step.sol.q, step.basis
         self._state = (q, basis)
         return step
+
+    def _continuation_goals(self, target):
+        """The active setpoints to solve in turn from the warm start to ``target``: steps of
+        at most ``continuation_step``, ``target`` last; None if the distance is not finite."""
+        q = self._state[0]
+        start = [q[j] for j in self.mechanism.active_index]
+        distance = max(abs(t - s) for t, s in zip(target, start))
+        if not distance < math.inf:
+            return None
+        n_steps = max(1, math.ceil(distance / self.continuation_step - 1e-9))
+        return [[s + (t - s) * (k / n_steps) for s, t in zip(start, target)]
+                for k in range(1, n_steps)] + [target]
 
     def _program_serial(self, target, qd, qdd):
         """_solve_serial and the torques by the straight-line code, through the same
         continuation steps; None (and the state unchanged) when it cannot serve a step."""
         if self._program is None:
             return None
-        m = self.mechanism
-        state = self._state
-        start = [state[0][j] for j in m.active_index]
-        distance = max(abs(t - s) for t, s in zip(target, start))
-        if not distance < math.inf:
+        goals = self._continuation_goals(target)
+        if goals is None:
             return None
-        n_steps = max(1, math.ceil(distance / self.continuation_step - 1e-9))
-        for k in range(1, n_steps + 1):
-            goal = target if k == n_steps else \
-                [s + (t - s) * (k / n_steps) for s, t in zip(start, target)]
+        state = self._state
+        for goal in goals:
             done = self._program.torques(state, goal, qd, qdd)
             if done is None:
                 return None
