@@ -18,7 +18,9 @@ answered (the topic is reliable and ordered, and every setpoint here is valid). 
 that lost commands reports the loss and no percentiles. The driver subscribes to nothing
 else, so it is not the bottleneck at 2 kHz. Messages
 lost = setpoints sent - commands received after a 1 s drain. The first 100 answers of each
-run are left out of the percentiles (warm-up). Not a test: it prints a table (and
+run are left out of the percentiles (warm-up). After each cog_id_node run the node's own
+compute time per setpoint (receipt to publication, from its /diagnostics) is reported
+too, which separates the node's work from transport and executor. Not a test: it prints a table (and
 ``--json`` writes one).
 """
 import argparse
@@ -75,6 +77,7 @@ class Driver:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
@@ -94,6 +97,8 @@ class Driver:
                                       self._on_cog, reader)
         self.recv = None
         self.commands = []          # arrival times of cog_id_node's effort_command
+        self.diagnostics = {}       # key -> value of cog_id_node's latest DiagnosticStatus
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self.start_ns = 0
         self.period_ns = 1
 
@@ -106,6 +111,19 @@ class Driver:
         t = time.perf_counter()
         if self.recv is not None:
             self.commands.append(t)
+
+    def _on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name.startswith('/cog/'):
+                self.diagnostics = {kv.key: kv.value for kv in status.values}
+
+    def node_compute_time(self):
+        """cog_id_node's own median and max compute time per setpoint (its /diagnostics,
+        over its last 1000 setpoints), from a report made after the run."""
+        self.diagnostics = {}
+        self.spin_for(1.2)
+        get = self.diagnostics.get
+        return float(get('compute_time_median_us') or 'nan'), float(get('compute_time_max_us') or 'nan')
 
     def spin_for(self, seconds):
         end = time.perf_counter() + seconds
@@ -219,6 +237,9 @@ def main(argv=None):
                 driver.spin_for(0.5)
                 row = summarize(*driver.run(ns, rate, args.duration))
                 row.update(node=label, rate_hz=rate)
+                if ns == '/cog':
+                    row['node_compute_p50_us'], row['node_compute_max_us'] = \
+                        driver.node_compute_time()
                 results.append(row)
                 print(f'{label:12s} {rate:6.0f} Hz: sent {row["sent"]:6d} lost {row["lost"]:5d}  '
                       f'latency p50 {row["p50_us"]:7.0f} p90 {row["p90_us"]:7.0f} '
@@ -239,7 +260,9 @@ def main(argv=None):
     for rate in args.rates:
         echo, cog = by[(rate, 'echo node')], by[(rate, 'cog_id_node')]
         print(f'{rate:.0f} Hz: cog_id_node median latency {cog["p50_us"] - echo["p50_us"]:+.0f} us '
-              f'over the echo node (target <= +100 us); lost {cog["lost"]} (target 0)')
+              f'over the echo node (target <= +100 us); lost {cog["lost"]} (target 0); '
+              f'its own compute time per setpoint (diagnostics, last 1000): median '
+              f'{cog["node_compute_p50_us"]:.0f} us, max {cog["node_compute_max_us"]:.0f} us')
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump(results, f, indent=1)
