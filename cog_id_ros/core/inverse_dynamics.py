@@ -343,9 +343,9 @@ class InverseDynamics:
             done = self._program.torques(state, goal, qd, qdd)
             if done is None:
                 return None
-            state = done[1]
+            tau, state = done
         self._state = state
-        return done[0]
+        return tau
 
     def _serial_positions(self, target, sample):
         """Every joint coordinate at one sample (as _solve_serial.sol.q), by the straight-line

@@ -53,7 +53,7 @@ class SampleProgram:
         condition = sol.lsq.condition_number()
         tau = pipeline(sol, basis, condition, qd, qdd, SymOps)
         free_rows = [x for j in m.free_joints for x in basis[j]]
-        self.full, self.source, full_ops = compile_function(
+        self.full, _, full_ops = compile_function(
             'full', params, closure_outputs + [condition] + list(tau) + free_rows)
         self.operations = (newton_ops, full_ops)
         # the velocity basis rows of the primary actuators are constant unit rows
@@ -61,8 +61,8 @@ class SampleProgram:
                            for k, j in enumerate(m.primary_joints)}
 
     def torques(self, state, target, qd, qdd):
-        """(torques, new state, closure residual, condition number) for one sample from
-        ``state`` = (q, basis), at most one continuation step away; None when the general
+        """(torques, new state) for one sample from ``state`` = (q, basis), at most one
+        continuation step away; None when the general
         path must decide (slow convergence, a singular or unclosable pose)."""
         m = self.mechanism
         q, basis = state
@@ -107,4 +107,4 @@ class SampleProgram:
             new_basis[j] = row
         for i, j in enumerate(free):
             new_basis[j] = list(rows[i * dof:(i + 1) * dof])
-        return tau, (q, new_basis), residual, condition
+        return tau, (q, new_basis)

@@ -24,7 +24,6 @@ _UNARY = {
     'cos': 'cos({0})',
     'sqrt': '(sqrt({0}) if {0} >= 0.0 else nan)',
     'recip': '(1.0 / {0} if {0} != 0.0 else inf)',
-    'abs': 'abs({0})',
 }
 _BINARY = {'add': '{0} + {1}', 'sub': '{0} - {1}', 'mul': '{0} * {1}', 'div': '{0} / {1}'}
 
