@@ -56,6 +56,7 @@ from .core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
 from .ros_conversions import (REASONS, EffortMessages, JointSelector, Rejected,
                               effort_trajectory, rejection, setpoint_arrays, stamp_to_ns,
                               trajectory_arrays)
+from . import stop_signals
 from .setpoint_filter import SetpointFilter, StampError
 
 NODE_NAME = 'cog_id_node'
@@ -472,11 +473,16 @@ def _check_node_parameter(name, value, n_act):
 def main(args=None):
     """Start the node and spin until Ctrl-C or SIGTERM (exit status 0).
 
-    A parameter that cannot be honoured: exit status 2 and one line naming it.
+    A parameter that cannot be honoured: exit status 2 and one line naming it. A stop
+    signal that arrives while the node is being built is held until it is built (see
+    :mod:`cog_id_ros.stop_signals`), so it stops the node cleanly too.
     """
+    held = stop_signals.hold()
+    stop_signals.no_keyboard_interrupt()
     try:
         rclpy.init(args=args)
     except Exception as exc:   # noqa: BLE001 (e.g. a params file rcl cannot parse)
+        stop_signals.release(held)
         print(f'{NODE_NAME}: cannot start: {_one_line(exc)}', file=sys.stderr)
         return 2
     node = None
@@ -484,6 +490,7 @@ def main(args=None):
         node = CogIdNode()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        stop_signals.release(held)
         executor.spin()
     except (MechanismConfigError, rclpy.exceptions.InvalidParameterTypeException,
             rclpy.exceptions.InvalidParameterValueException) as exc:
@@ -494,8 +501,10 @@ def main(args=None):
     except Exception:   # noqa: BLE001
         if rclpy.ok():
             raise
-        # a signal during start-up shut the context down under our feet: a clean stop too
+        # the signal shut the context down between two turns of spin(), whose next wait set
+        # then fails on the dead context (an RCLError): a clean stop too
     finally:
+        stop_signals.release(held)   # no-op when already released
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -28,7 +28,7 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from . import trajectory_io
+from . import stop_signals, trajectory_io
 from .node import control_qos
 from .ros_conversions import NANOSECONDS, stamp_to_ns
 
@@ -192,9 +192,11 @@ def main(argv=None):
         qd = None
     if args.rate:
         times, q, qd = resample(times, q, qd, args.rate)
+    held = stop_signals.hold()   # a Ctrl-C while the node is built stops it cleanly
     rclpy.init(args=argv)
     player = Player(joints, args.topic, args.effort_topic if args.output else None)
     try:
+        stop_signals.release(held)
         if not player.wait_for_node(args.wait):
             print(f'cog_id_player: nothing subscribes to {player.publisher.topic_name} '
                   f'after {args.wait:g} s (is cog_id_node running, in this namespace and '
