@@ -56,6 +56,11 @@ def test_non_finite_setpoints_are_rejected(bad):
         s.torques(bad, [0.0], [0.0])
     with pytest.raises(cog_id_ros.SetpointError, match='sample 1: qd of joint3'):
         s.torques([[1.5], [1.6]], [[0.0], bad], [[0.0], [0.0]])
+    # one sample: a bad velocity or acceleration is refused too, not turned into NaN torques
+    with pytest.raises(cog_id_ros.SetpointError, match='qd of joint3'):
+        s.torques([1.5], bad, [0.0])
+    with pytest.raises(cog_id_ros.SetpointError, match='qdd of joint3'):
+        s.torques([1.5], [0.0], bad)
 
 
 def test_wrong_shapes_are_rejected_with_the_expected_shape():

@@ -138,6 +138,9 @@ class InverseDynamics:
             return np.array(self._torques(step, sample[1], sample[2], sp.ScalarOps))
         q, qd, qdd, single = self._inputs(q, qd, qdd)
         if single:
+            _, errors = self._check_finite(q, qd, qdd, single)
+            if errors:
+                raise errors[0]
             step = self._solve_serial(q[0].tolist())
             return np.array(self._torques(step, qd[0].tolist(), qdd[0].tolist(), sp.ScalarOps))
         return self._evaluate(q, qd, qdd, 'raise').torques
