@@ -30,7 +30,15 @@ class Counting:
     """Wraps a SampleProgram and counts the samples it served itself."""
 
     def __init__(self, program):
-        self.program, self.served, self.handed_over = program, 0, 0
+        self.program, self.served, self.handed_over, self.stepped = program, 0, 0, 0
+
+    def step(self, *args):
+        """The unrolled glue: served here, or (None) left to the loops of torques()."""
+        done = self.program.step(*args)
+        if done is not None:
+            self.served += 1
+            self.stepped += 1
+        return done
 
     def torques(self, *args):
         done = self.program.torques(*args)
@@ -54,6 +62,27 @@ def test_straight_line_torques_equal_the_general_path_at_control_rate(name):
         assert np.max(np.abs(a - b)) <= 1e-13 * max(peak, 1.0), k
         assert np.allclose(fast._state[0], general._state[0], rtol=0, atol=1e-13)
     assert counter.served >= 495 and counter.handed_over <= 6
+    assert counter.stepped >= 490       # nearly every sample takes the unrolled glue
+
+
+@pytest.mark.parametrize('name', NON_REDUNDANT)
+def test_unrolled_step_is_the_glue_to_the_last_bit(name):
+    """step() and the loops of torques() give identical torques and states, sample by sample."""
+    fast, _ = solvers(from_yaml(config_path(name)))
+    program = fast._program
+    _, q, qd, qdd = sample(name, 2001)          # 1 kHz, as in the test above
+    served = 0
+    for k in range(0, 2001, 2):
+        target, v, a = q[k].tolist(), qd[k].tolist(), qdd[k].tolist()
+        state = fast._state
+        stepped = program.step(state, target, v, a, fast.continuation_step)
+        looped = program.torques(state, target, v, a)
+        if stepped is not None:
+            served += 1
+            assert list(stepped[0]) == list(looped[0]), k
+            assert stepped[1][0] == looped[1][0] and stepped[1][1] == looped[1][1], k
+        fast.torques(q[k], qd[k], qdd[k])
+    assert served >= 990
 
 
 def test_far_setpoint_takes_the_same_continuation_steps_as_the_general_path():
@@ -135,3 +164,33 @@ def test_compiled_function_computes_what_floats_compute():
         got = fn([u], [v, w])
         for e, x in zip(expected, got):
             assert (math.isnan(e) and math.isnan(x)) or e == x
+
+
+@pytest.mark.parametrize('name', list(TRAJECTORIES))
+def test_sample_torques_is_torques_without_numpy(name):
+    """Lists in, a list out: the same numbers and state as torques(), redundant ones too."""
+    mechanism = cog_id_ros.Mechanism.from_params_file(config_path(name))
+    lists, arrays = cog_id_ros.InverseDynamics(mechanism), cog_id_ros.InverseDynamics(mechanism)
+    _, q, qd, qdd = sample(name, 2001)
+    for k in range(0, 2001, 5):
+        got = lists.sample_torques(q[k].tolist(), qd[k].tolist(), qdd[k].tolist())
+        assert type(got) is list and all(type(x) is float for x in got)
+        assert got == arrays.torques(q[k], qd[k], qdd[k]).tolist(), k
+    assert lists._state[0] == arrays._state[0]
+
+
+def test_sample_torques_reports_bad_input_like_torques_and_keeps_the_state():
+    solver = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_params_file(
+        'config/paper_four_bar_a.yaml'))
+    solver.sample_torques([1.5], [0.0], [0.0])
+    state = solver._state
+    for q, qd, qdd in (([math.nan], [0.0], [0.0]), ([1.5], [math.inf], [0.0]),
+                       ([1.5], [0.0], [math.nan]), ([1.5, 1.0], [0.0], [0.0]),
+                       (['x'], [0.0], [0.0])):
+        with pytest.raises(cog_id_ros.SetpointError):
+            solver.sample_torques(q, qd, qdd)
+        assert solver._state is state
+    with pytest.raises(cog_id_ros.SingularConfigurationError):
+        solver.sample_torques([0.0], [0.0], [0.0])
+    assert solver._state is state
+    assert solver.sample_torques([1.5], None, None) == solver.torques([1.5]).tolist()

@@ -145,6 +145,27 @@ class InverseDynamics:
             return np.array(self._torques(step, qd[0].tolist(), qdd[0].tolist(), sp.ScalarOps))
         return self._evaluate(q, qd, qdd, 'raise').torques
 
+    def sample_torques(self, q, qd, qdd):
+        """One sample at control rate: three sequences of M floats in, a list of M torques out.
+
+        The same numbers, state and errors as :meth:`torques` on one sample, without the
+        numpy round trip or the input checks that the straight-line code makes anyway (a
+        NaN, an infinity or a wrong length goes to :meth:`torques`, which says what is
+        wrong). This is what cog_id_node calls for every setpoint.
+        """
+        program = self._program
+        if program is not None and program.step is not None:
+            try:
+                n = len(self.mechanism.active_joints)
+                if len(q) == len(qd) == len(qdd) == n:
+                    done = program.step(self._state, q, qd, qdd, self.continuation_step)
+                    if done is not None:
+                        self._state = done[1]
+                        return done[0]
+            except TypeError:      # None or a non-number somewhere: torques() reports it
+                pass
+        return self.torques(q, qd, qdd).tolist()
+
     def evaluate(self, q, qd=None, qdd=None, on_invalid='raise'):
         """Torques with per-sample status (an Evaluation). on_invalid='skip' marks samples that
         cannot be served as invalid instead of raising; the others are computed as usual."""
@@ -338,6 +359,12 @@ class InverseDynamics:
         continuation steps; None (and the state unchanged) when it cannot serve a step."""
         if self._program is None:
             return None
+        step = self._program.step
+        if step is not None:        # the usual sample: one goal, at most one Newton step
+            done = step(self._state, target, qd, qdd, self.continuation_step)
+            if done is not None:
+                tau, self._state = done
+                return tau
         goals = self._continuation_goals(target)
         if goals is None:
             return None

@@ -9,7 +9,10 @@ closed configuration. The lane code of those steps is traced once per mechanism
     full(q, qd, qdd)   -> the same, then condition number, torques, velocity basis
 
 and this module strings them together exactly as the general path does (same predictor,
-same step limit, same checks), so the torques agree with it to the last bit. Anything out
+same step limit, same checks), so the torques agree with it to the last bit. The usual
+sample at control rate (one continuation goal, a Newton step or two) is strung together
+by ``step()``, that same glue unrolled for the mechanism's sizes; :meth:`SampleProgram.torques`
+is the glue for everything else. Anything out
 of the ordinary (Newton not converging in a few steps, a singular or unclosable pose)
 returns None and the general path, which raises the right error, takes over from the same
 state.
@@ -24,6 +27,9 @@ from .straight_line import Graph, SymOps, compile_function
 
 #: Newton steps tried here before handing over to the general path
 MAX_NEWTON_STEPS = 4
+
+#: Newton steps tried by the unrolled step() before handing over to the loops
+UNROLLED_NEWTON_STEPS = 2
 
 
 class SampleProgram:
@@ -59,6 +65,7 @@ class SampleProgram:
         # the velocity basis rows of the primary actuators are constant unit rows
         self._unit_rows = {j: [1.0 if i == k else 0.0 for i in range(m.dof)]
                            for k, j in enumerate(m.primary_joints)}
+        self.step = _compile_step(self)
 
     def torques(self, state, target, qd, qdd):
         """(torques, new state) for one sample from ``state`` = (q, basis), at most one
@@ -108,3 +115,87 @@ class SampleProgram:
         for i, j in enumerate(free):
             new_basis[j] = list(rows[i * dof:(i + 1) * dof])
         return tau, (q, new_basis)
+
+
+def _compile_step(program):
+    """``step(state, target, qd, qdd, continuation_step)`` -> (torques, new state) or None.
+
+    The glue of :meth:`SampleProgram.torques` (and the continuation check of the solver)
+    written out for this mechanism's sizes, for the case that covers nearly every sample
+    at control rate: ``target`` within one continuation step, and closed after at most
+    ``UNROLLED_NEWTON_STEPS`` Newton steps. Every expression is the one the loops evaluate,
+    in the same order, so the result is the same to the last bit; any other case returns
+    None before anything is changed, and the loops take over.
+    """
+    m = program.mechanism
+    n = len(m.joints)
+    nr, nl, nc, dof = program.n_residual, program.n_loops, program.n_closure, m.dof
+    n_act = len(m.active_joints)
+    if not n or not nr:
+        return None
+    qs = [f'q{i}' for i in range(n)]
+    vector = '[' + ', '.join(qs) + ']'
+    lines = ['def step(state, target, qd, qdd, continuation_step):',
+             f'    ({", ".join(qs)},), basis = state' if n == 1 else
+             f'    ({", ".join(qs)}), basis = state']
+    # the continuation goals: one goal (target itself) when the distance needs one step
+    gaps = [f'abs(target[{a}] - q{j})' for a, j in enumerate(m.active_index)]
+    distance = gaps[0] if len(gaps) == 1 else f'max({", ".join(gaps)})'
+    lines += [f'    if not {distance} / continuation_step - 1e-9 <= 1.0:',
+              '        return None']
+    # the predictor: q + basis (target - q) on the primary actuators, then the targets
+    lines += [f'    d{k} = target[{a}] - q{j}'
+              for k, (a, j) in enumerate(zip(m.primary, m.primary_joints))]
+    for i in range(n):
+        terms = [f'basis[{i}][{k}] * d{k}' for k in range(len(m.primary))]
+        moved = terms[0] if len(terms) == 1 else '(0 + ' + ' + '.join(terms) + ')'
+        lines.append(f'    q{i} = q{i} + {moved}')
+    lines += [f'    q{j} = target[{a}]' for a, j in zip(m.primary, m.primary_joints)]
+
+    def closed(out):
+        residual = (f'abs({out}[0])' if nr == 1 else
+                    'max(' + ', '.join(f'abs({out}[{r}])' for r in range(nr)) + ')')
+        test = f'{residual} < {m.closure_tolerance!r}'
+        if nl:
+            cosine = (f'{out}[{nr}]' if nl == 1 else
+                      'min(' + ', '.join(f'{out}[{nr + c}]' for c in range(nl)) + ')')
+            test += f' and {cosine} > 0.0'
+        return test
+
+    free = m.free_joints
+    size = ('abs(o[{}])'.format(nr + nl) if len(free) == 1 else
+            'max(' + ', '.join(f'abs(o[{nr + nl + k}])' for k in range(len(free))) + ')')
+    largest = 'abs(q0)' if n == 1 else 'max(' + ', '.join(f'abs({x})' for x in qs) + ')'
+    lines += [f'    o = newton({vector}, qd, qdd)',
+              f'    if {closed("o")}:',
+              f'        o = full({vector}, qd, qdd)',
+              f'        if not ({closed("o")}):',
+              '            return None',
+              '    else:',
+              f'        for _ in range({UNROLLED_NEWTON_STEPS}):',
+              f'            size = {size}',
+              f'            if not size < inf or size < 1e-15 * (1.0 + {largest}):',
+              '                return None',
+              f'            factor = min(1.0, {program.max_step!r} / size)']
+    lines += [f'            q{j} = q{j} - o[{nr + nl + k}] * factor' for k, j in enumerate(free)]
+    lines += [f'            o = full({vector}, qd, qdd)',
+              f'            if {closed("o")}:',
+              '                break',
+              '        else:',
+              '            return None']
+    tau = [f'o[{nc + 1 + a}]' for a in range(n_act)]
+    finite = ' and '.join(f'isfinite({t})' for t in tau)
+    lines += [f'    if not (o[{nc}] <= {m.max_condition_number!r} and {finite}):',
+              '        return None']
+    rows = {j: f'unit{j}' for j in m.primary_joints}
+    first = nc + 1 + n_act
+    for k, j in enumerate(free):
+        rows[j] = '[' + ', '.join(f'o[{first + k * dof + i}]' for i in range(dof)) + ']'
+    lines.append(f'    return [{", ".join(tau)}], ({vector}, '
+                 f'[{", ".join(rows[j] for j in range(n))}])')
+    namespace = {'newton': program.newton, 'full': program.full, 'inf': math.inf,
+                 'isfinite': math.isfinite}
+    namespace.update({f'unit{j}': row for j, row in program._unit_rows.items()})
+    program.step_source = source = '\n'.join(lines) + '\n'
+    exec(compile(source, '<sample_program step>', 'exec'), namespace)   # noqa: S102
+    return namespace['step']
