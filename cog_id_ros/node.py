@@ -255,8 +255,7 @@ class CogIdNode(Node):
             q, v = setpoint_arrays(msg, self.selector)
             stamp = stamp_to_ns(msg.header.stamp) or self.get_clock().now().nanoseconds
             v_used, a = self.filter.estimate(stamp, q, v)
-            tau = self.solver.torques(q, v_used, a)   # the lean single-sample path of the core
-            efforts = tau.tolist()
+            efforts = self.solver.sample_torques(q, v_used, a)   # the core's control-rate call
             if not all(map(math.isfinite, efforts)):
                 raise Rejected('singular', 'the torques are not finite at this setpoint')
         except Rejected as exc:
@@ -269,11 +268,12 @@ class CogIdNode(Node):
             bad = rejection(exc, self.mechanism.is_redundant)
             self.reject(bad.reason, str(bad))
             return
-        if self.limited and self.clip(tau):
-            efforts = tau.tolist()
-        command, state = self.outputs.fill(msg.header, q, v_used, efforts)
-        self.command_pub.publish(command)
-        self.effort_pub.publish(state)
+        if self.limited:
+            tau = np.array(efforts)
+            if self.clip(tau):
+                efforts = tau.tolist()
+        self.command_pub.publish(self.outputs.command_for(efforts))   # first: what control waits for
+        self.effort_pub.publish(self.outputs.state_for(msg.header, q, v_used, efforts))
         self.filter.accept(stamp, q, v)
         self.counts['accepted'] += 1
         self.last_pose = q

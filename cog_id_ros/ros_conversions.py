@@ -194,12 +194,16 @@ class EffortMessages:
         self.state = JointState()
         self.state.name = list(active_joints)
 
-    def fill(self, header, positions, velocities, efforts):
-        """effort_command and joint_effort for one setpoint (lists of floats)."""
+    def command_for(self, efforts):
+        """effort_command for one setpoint (a list of floats)."""
         self.command.data = efforts
+        return self.command
+
+    def state_for(self, header, positions, velocities, efforts):
+        """joint_effort for one setpoint (lists of floats)."""
         state = self.state
         state.header = header
         state.position = positions
         state.velocity = velocities
         state.effort = efforts
-        return self.command, state
+        return state

@@ -112,8 +112,9 @@ class SetpointFilter:
         rows = self._history[:self.window - 1]
         w1, w2 = _weights(self._offsets(stamp_ns, rows))
         past = [r[1] for r in rows]
-        acc = _weighted_differences(w2, past, q)
-        return (_weighted_differences(w1, past, q) if v is None else v), acc
+        if v is None:
+            return _two_weighted_differences(w1, w2, past, q)
+        return v, _weighted_differences(w2, past, q)
 
     def accept(self, stamp_ns, positions, velocities=None):
         """Add a served setpoint to the history (``velocities``: as given, or None)."""
@@ -146,6 +147,17 @@ def _weighted_differences(weights, past, now):
         for j, (x, x0) in enumerate(zip(row, now)):
             out[j] += w * (x - x0)
     return out
+
+
+def _two_weighted_differences(w1, w2, past, now):
+    """_weighted_differences for w1 and for w2 in one pass (the same sums, in the same order)."""
+    out1, out2 = [0.0] * len(now), [0.0] * len(now)
+    for a, b, row in zip(w1, w2, past):
+        for j, (x, x0) in enumerate(zip(row, now)):
+            diff = x - x0
+            out1[j] += a * diff
+            out2[j] += b * diff
+    return out1, out2
 
 
 @functools.lru_cache(maxsize=512)
