@@ -118,16 +118,18 @@ def setpoint_arrays(msg, selector):
     Positions are required; velocities are optional (an empty array); efforts are ignored
     but, like velocities, must have one entry per name when present. Raises Rejected.
     """
-    n = len(msg.name)
-    if n == 0 and len(msg.position) == 0:
+    names, position, velocity = msg.name, msg.position, msg.velocity   # each read is a property
+    n = len(names)
+    if n == 0 and len(position) == 0:
         raise Rejected('empty', 'empty setpoint: no joint names and no positions')
-    for field in ('position', 'velocity', 'effort'):
-        size = len(getattr(msg, field))
+    for field, values in (('position', position), ('velocity', velocity),
+                          ('effort', msg.effort)):
+        size = len(values)
         if size != n and (field == 'position' or size):
             raise Rejected('malformed', f'{n} names but {size} {field} values')
-    index = selector.indices(msg.name)
-    q = _pick(msg.position, index, 'position')
-    v = _pick(msg.velocity, index, 'velocity') if len(msg.velocity) else None
+    index = selector.indices(names)
+    q = _pick(position, index, 'position')
+    v = _pick(velocity, index, 'velocity') if len(velocity) else None
     return q, v
 
 
