@@ -98,10 +98,14 @@ class SetpointFilter:
         Raises StampError for a stamp that does not increase. Plain Python floats: for the
         handful of joints of a mechanism they are faster than numpy's small-array calls.
         """
-        self.check_stamp(stamp_ns)
+        last = self.last_stamp_ns
+        if last is not None and stamp_ns <= last:
+            self.check_stamp(stamp_ns)      # raises, with the message
         q = [float(x) for x in positions]
         v = None if velocities is None else [float(x) for x in velocities]
-        if self.restarts_at(stamp_ns):
+        history = self._history          # (restarts_at, inlined: this runs per setpoint)
+        if not history or (self.max_interval_ns is not None and
+                           stamp_ns - history[0][0] > self.max_interval_ns):
             zeros = [0.0] * len(q)
             return (zeros if v is None else v), zeros
         if v is not None:
@@ -109,7 +113,7 @@ class SetpointFilter:
             if rows:
                 w1, _ = _weights(self._offsets(stamp_ns, rows))
                 return v, _weighted_differences(w1, [r[2] for r in rows], v)
-        rows = self._history[:self.window - 1]
+        rows = history[:self.window - 1]
         w1, w2 = _weights(self._offsets(stamp_ns, rows))
         past = [r[1] for r in rows]
         if v is None:
