@@ -53,11 +53,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
+from . import stop_signals
 from .core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
 from .ros_conversions import (REASONS, EffortMessages, JointSelector, Rejected,
                               effort_trajectory, rejection, setpoint_arrays, stamp_to_ns,
                               trajectory_arrays)
-from . import stop_signals
 from .setpoint_filter import SetpointFilter, StampError
 
 NODE_NAME = 'cog_id_node'

@@ -360,7 +360,7 @@ class InverseDynamics:
         if self._program is None:
             return None
         step = self._program.step
-        if step is not None:        # the usual sample: one goal, at most one Newton step
+        if step is not None:        # the usual sample: one goal, at most two Newton steps
             done = step(self._state, target, qd, qdd, self.continuation_step)
             if done is not None:
                 tau, self._state = done

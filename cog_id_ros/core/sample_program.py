@@ -11,11 +11,10 @@ closed configuration. The lane code of those steps is traced once per mechanism
 and this module strings them together exactly as the general path does (same predictor,
 same step limit, same checks), so the torques agree with it to the last bit. The usual
 sample at control rate (one continuation goal, a Newton step or two) is strung together
-by ``step()``, that same glue unrolled for the mechanism's sizes; :meth:`SampleProgram.torques`
-is the glue for everything else. Anything out
-of the ordinary (Newton not converging in a few steps, a singular or unclosable pose)
-returns None and the general path, which raises the right error, takes over from the same
-state.
+by ``step()``, that same glue unrolled for the mechanism's sizes;
+:meth:`SampleProgram.torques` is the glue for everything else. Anything out of the
+ordinary (Newton not converging in a few steps, a singular or unclosable pose) returns
+None and the general path, which raises the right error, takes over from the same state.
 
 Redundantly actuated mechanisms keep the general path (their projection is iterative).
 """
