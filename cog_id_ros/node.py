@@ -475,15 +475,13 @@ def main(args=None):
     """Start the node and spin until Ctrl-C or SIGTERM (exit status 0).
 
     A parameter that cannot be honoured: exit status 2 and one line naming it. A stop
-    signal that arrives while the node is being built is held until it is built (see
-    :mod:`cog_id_ros.stop_signals`), so it stops the node cleanly too.
+    signal that arrives while the node is being built is noted and acted on once it is
+    built (see :mod:`cog_id_ros.stop_signals`), so it stops the node cleanly too.
     """
-    held = stop_signals.hold()
-    stop_signals.no_keyboard_interrupt()
+    stop = stop_signals.DeferredStop()
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=stop.RCLPY_OPTIONS)
     except Exception as exc:   # noqa: BLE001 (e.g. a params file rcl cannot parse)
-        stop_signals.release(held)
         print(f'{NODE_NAME}: cannot start: {_one_line(exc)}', file=sys.stderr)
         return 2
     node = None
@@ -496,13 +494,13 @@ def main(args=None):
         # pause (~10 ms on the reference VM) becomes microseconds.
         gc.collect()
         gc.freeze()
-        stop_signals.release(held)
-        executor.spin()
+        if stop.hand_over() is None:   # no stop asked for during start-up
+            executor.spin()
     except (MechanismConfigError, rclpy.exceptions.InvalidParameterTypeException,
             rclpy.exceptions.InvalidParameterValueException) as exc:
         print(f'{NODE_NAME}: cannot start: {_one_line(exc)}', file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except ExternalShutdownException:
         pass   # Ctrl-C or SIGTERM: rclpy's signal handler has shut the context down
     except Exception:   # noqa: BLE001
         if rclpy.ok():
@@ -510,7 +508,6 @@ def main(args=None):
         # the signal shut the context down between two turns of spin(), whose next wait set
         # then fails on the dead context (an RCLError): a clean stop too
     finally:
-        stop_signals.release(held)   # no-op when already released
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -192,11 +192,12 @@ def main(argv=None):
         qd = None
     if args.rate:
         times, q, qd = resample(times, q, qd, args.rate)
-    held = stop_signals.hold()   # a Ctrl-C while the node is built stops it cleanly
-    rclpy.init(args=argv)
+    stop = stop_signals.DeferredStop()   # a Ctrl-C while the node is built stops it cleanly
+    rclpy.init(args=argv, signal_handler_options=stop.RCLPY_OPTIONS)
     player = Player(joints, args.topic, args.effort_topic if args.output else None)
     try:
-        stop_signals.release(held)
+        if stop.hand_over(restore_python_handlers=True) is not None:
+            return 130
         if not player.wait_for_node(args.wait):
             print(f'cog_id_player: nothing subscribes to {player.publisher.topic_name} '
                   f'after {args.wait:g} s (is cog_id_node running, in this namespace and '

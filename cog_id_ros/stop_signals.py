@@ -1,41 +1,59 @@
-"""Hold Ctrl-C and SIGTERM back while a console script builds its rclpy objects.
+"""Ctrl-C and SIGTERM while a console script builds its rclpy objects: noted, acted on after.
 
 rclpy's signal handler shuts the context down the moment SIGINT or SIGTERM arrives. If that
 happens while a node or an executor is half built, its constructor fails on the dead context
-and the half-built object prints "Exception ignored in __del__" tracebacks at exit. Holding
-the two signals until everything exists turns a stop during start-up into an ordinary stop:
-the signal stays pending and is delivered, to rclpy's handler, when released.
+and the half-built object prints "Exception ignored in __del__" tracebacks at exit.
 
-Python's own SIGINT handler raises KeyboardInterrupt at whatever line runs next, which may
-be in the middle of the clean-up after rclpy has already stopped the executor. A node that
-stops through rclpy's context shutdown alone calls :func:`no_keyboard_interrupt` first.
+Blocking the two signals in the main thread (pthread_sigmask) does not prevent it: threads
+that exist before ``main()`` runs -- OpenBLAS starts one when numpy is imported, SciPy
+another -- do not block them, so the kernel delivers the signal there and rclpy's C
+handler runs at once (measured: 1 start in 3-10 with a signal right after the first log
+line). So the scripts start rclpy *without* its signal handlers and install Python-level
+handlers that only note the signal (Python runs them in the main thread, whichever thread
+the kernel picked). Once everything exists, :meth:`DeferredStop.hand_over` installs
+rclpy's handlers and says whether a stop was asked for meanwhile::
 
-Threads started while the signals are held (the DDS threads) inherit the mask and never take
-them, so the main thread gets them, which is where Python runs its handlers anyway.
+    stop = DeferredStop()
+    rclpy.init(args=args, signal_handler_options=stop.RCLPY_OPTIONS)
+    ... build node and executor ...
+    if stop.hand_over():
+        return 0                 # stopped during start-up: clean up, no spin
+    executor.spin()              # from here on a signal shuts the context down (rclpy)
+
+The node keeps the noting handlers after the hand-over (rclpy's handler calls them too):
+Ctrl-C then stops it only through rclpy's context shutdown, never by a KeyboardInterrupt
+raised at an arbitrary line of the clean-up.
 """
 import signal
 
-STOP_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
+from rclpy.signals import SignalHandlerOptions, install_signal_handlers
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-def hold():
-    """Block SIGINT and SIGTERM in this thread; returns the mask to give to :func:`release`."""
-    return signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+class DeferredStop:
+    """Note SIGINT and SIGTERM until :meth:`hand_over` gives them to rclpy."""
 
+    #: the ``signal_handler_options`` for ``rclpy.init``: none until the hand-over
+    RCLPY_OPTIONS = SignalHandlerOptions.NO
 
-def release(previous):
-    """Restore the mask from :func:`hold`; a signal that came meanwhile is delivered now."""
-    signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+    def __init__(self):
+        self.received = None        # the first stop signal noted, or None
+        self._previous = {signum: signal.signal(signum, self._note) for signum in STOP_SIGNALS}
 
+    def _note(self, signum, frame):
+        if self.received is None:
+            self.received = signum
 
-def no_keyboard_interrupt():
-    """Make Python's SIGINT handler a no-op: install before ``rclpy.init``, which chains to it.
+    def hand_over(self, restore_python_handlers=False):
+        """Install rclpy's signal handlers; return the signal noted before, or None.
 
-    Ctrl-C then stops the process only through rclpy (the context shuts down, spin returns),
-    never by a KeyboardInterrupt raised at an arbitrary line.
-    """
-    signal.signal(signal.SIGINT, _ignore)
-
-
-def _ignore(signum, frame):
-    """Python-level SIGINT handler that does nothing (rclpy's handler does the work)."""
+        ``restore_python_handlers``: put back the Python handlers that were there before
+        (e.g. Python's KeyboardInterrupt for Ctrl-C, for a script that catches it);
+        otherwise the noting handlers stay.
+        """
+        if restore_python_handlers:
+            for signum, handler in self._previous.items():
+                signal.signal(signum, handler)
+        install_signal_handlers(SignalHandlerOptions.ALL)
+        return self.received

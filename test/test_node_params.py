@@ -104,8 +104,12 @@ def test_integer_arrays_are_accepted_and_sigterm_exits_cleanly(tmp_path, ros_env
 def test_a_stop_signal_during_start_up_is_a_clean_stop(ros_env, signum):
     """The signal lands while the executor is still being built, right after the first line.
 
-    Before the stop signals were held during start-up, this left half-built rclpy objects
-    that printed tracebacks at exit (about one start in ten). Several starts per signal.
+    rclpy's own handler shuts the context down in whichever thread the kernel hands the
+    signal to, and the OpenBLAS threads numpy and SciPy start at import do not block it:
+    blocking the signals in the main thread during start-up still left half-built rclpy
+    objects printing tracebacks in about one run of this test in two. Deferring rclpy's
+    handlers until everything is built (stop_signals.DeferredStop) passed every run.
+    Several starts per signal.
     """
     for attempt in range(4):
         proc = subprocess.Popen([f'{BIN}/cog_id_node', '--ros-args', '--params-file', CONFIG_A,
