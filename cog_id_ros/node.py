@@ -37,6 +37,7 @@ import collections
 import gc
 import math
 import sys
+import threading
 import time
 
 import numpy as np
@@ -59,6 +60,7 @@ from .ros_conversions import (REASONS, EffortMessages, JointSelector, Rejected,
                               effort_trajectory, rejection, setpoint_arrays, stamp_to_ns,
                               trajectory_arrays)
 from .setpoint_filter import SetpointFilter, StampError
+from .setpoint_loop import SetpointLoop
 
 NODE_NAME = 'cog_id_node'
 
@@ -106,9 +108,6 @@ NODE_PARAMETERS = {
 #: compute times kept for the diagnostics median and max (the last N setpoints)
 COMPUTE_TIME_WINDOW = 1000
 
-#: queued setpoints served in one callback at most before the executor gets a turn
-DRAIN_LIMIT = 50
-
 
 class CogIdNode(Node):
     """Inverse dynamics of the mechanism in its parameters, served over topics."""
@@ -130,6 +129,7 @@ class CogIdNode(Node):
         self.report_solver = InverseDynamics(mech)       # residual and condition for diagnostics
         self.filter = SetpointFilter(n_act, cfg['estimator_window'], cfg['max_setpoint_interval'])
         self.selector = JointSelector(self.active_joints)
+        self.trajectory_selector = JointSelector(self.active_joints)
         self.outputs = EffortMessages(self.active_joints)
 
         # bookkeeping for diagnostics and the timeout
@@ -146,6 +146,9 @@ class CogIdNode(Node):
         self.stream_stopped = True
         self._period_problems = 0             # rejections + clipping since the last report
         self._warned = {}                     # reason -> (monotonic time, suppressed count)
+        # joint_setpoint is served by a thread of its own (setpoint_loop.py), everything
+        # else by the executor: callbacks that touch the state above hold this lock
+        self.lock = threading.Lock()
 
         qos_options = QoSOverridingOptions.with_default_policies
         # Publishers go without rclpy's default QoS-event handlers: each costs the executor
@@ -163,9 +166,11 @@ class CogIdNode(Node):
             qos_overriding_options=qos_options())
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10,
                                                      event_callbacks=lean)
-        self.setpoint_sub = self.create_subscription(
-            JointState, 'joint_setpoint', self.on_setpoint, control_qos(),
-            qos_overriding_options=qos_options())
+        # The control-rate input: its own thread and wait set, outside the executor (see
+        # setpoint_loop.py). start() once the node is built; stop() before destroying it.
+        self.setpoint_loop = SetpointLoop(
+            self, JointState, 'joint_setpoint', self.serve_setpoint, control_qos(),
+            lock=self.lock, on_error=self._serve_failed, qos_overriding_options=qos_options())
         self.create_subscription(JointTrajectory, 'joint_trajectory', self.on_trajectory,
                                  control_qos(), qos_overriding_options=qos_options())
         self.create_timer(cfg['diagnostics_period'], self.publish_diagnostics)
@@ -224,33 +229,12 @@ class CogIdNode(Node):
 
     # --- setpoints ---------------------------------------------------------------------------
 
-    def on_setpoint(self, msg):
-        """Serve a setpoint, then every setpoint that queued up meanwhile, in order.
-
-        Each return to the executor costs a wait-set round trip (~0.2 ms in rclpy, more
-        than the solver), so a node that fell behind for a moment catches up by taking the
-        queued setpoints here; none is skipped. Bounded, so timers still run.
-        """
-        self.serve_setpoint(msg)
-        for _ in range(DRAIN_LIMIT):
-            msg = self._take_queued_setpoint()
-            if msg is None:
-                return
-            self.serve_setpoint(msg)
-
-    def _take_queued_setpoint(self):
-        """The next queued setpoint, or None (the executor's own take, on the same handle)."""
-        handle = self.setpoint_sub.handle
-        try:
-            with handle:
-                taken = handle.take_message(JointState, False)
-        except (AttributeError, TypeError):   # an rclpy without this call: let the executor do it
-            self._take_queued_setpoint = lambda: None
-            return None
-        return None if taken is None else taken[0]
-
     def serve_setpoint(self, msg):
-        """One JointState setpoint -> effort_command + joint_effort, or a counted rejection."""
+        """One JointState setpoint -> effort_command + joint_effort, or a counted rejection.
+
+        Called by the setpoint loop's thread with ``self.lock`` held, once per message, in
+        the order received; every message that queued up while it worked is served next.
+        """
         start = time.perf_counter()
         try:
             q, v = setpoint_arrays(msg, self.selector)
@@ -282,6 +266,11 @@ class CogIdNode(Node):
         self.last_setpoint_time = time.monotonic()
         self.stream_stopped = False
         self.compute_times.append(time.perf_counter() - start)
+
+    def _serve_failed(self, exc):
+        """A setpoint that failed in a way serve_setpoint does not expect (a bug): no
+        command, counted as 'solver', logged with its type; the next one is served."""
+        self.reject('solver', f'unexpected {type(exc).__name__}: {exc}')
 
     def clip(self, tau):
         """Clip efforts (in place, any shape) to +-effort_limits; count it; True if clipped."""
@@ -315,9 +304,13 @@ class CogIdNode(Node):
     # --- trajectories ------------------------------------------------------------------------
 
     def on_trajectory(self, msg):
-        """A whole JointTrajectory -> effort_trajectory, in one vectorised core call."""
+        """A whole JointTrajectory -> effort_trajectory, in one vectorised core call.
+
+        Solved without the lock (its own selector and solver), so a long trajectory never
+        holds up the setpoint stream; only the bookkeeping takes the lock.
+        """
         try:
-            _, q, qd, qdd = trajectory_arrays(msg, self.selector)
+            _, q, qd, qdd = trajectory_arrays(msg, self.trajectory_selector)
             self.trajectory_solver.reset()
             result = self.trajectory_solver.evaluate(q, qd, qdd, on_invalid='skip')
             if not result.valid.all():
@@ -325,21 +318,27 @@ class CogIdNode(Node):
                 bad = rejection(result.errors[k], self.mechanism.is_redundant)
                 raise Rejected(bad.reason, f'point {k}: {bad}')
         except Rejected as exc:
-            self.counts['trajectories_rejected'] += 1
-            self._period_problems += 1
-            self.warn_throttled('trajectory.' + exc.reason,
-                                f'trajectory of {len(msg.points)} points rejected ({exc.reason}), '
-                                f'no effort_trajectory: {exc}')
+            with self.lock:
+                self.counts['trajectories_rejected'] += 1
+                self._period_problems += 1
+                self.warn_throttled('trajectory.' + exc.reason,
+                                    f'trajectory of {len(msg.points)} points rejected '
+                                    f'({exc.reason}), no effort_trajectory: {exc}')
             return
         tau = result.torques
-        self.clip(tau)
+        with self.lock:
+            self.clip(tau)
+            self.counts['trajectories_accepted'] += 1
         self.trajectory_pub.publish(effort_trajectory(msg, self.active_joints, q, qd, qdd, tau))
-        self.counts['trajectories_accepted'] += 1
 
     # --- timeout -----------------------------------------------------------------------------
 
     def check_timeout(self):
         """When setpoints stop: restart the estimator and apply timeout_behavior, once."""
+        with self.lock:
+            self._check_timeout()
+
+    def _check_timeout(self):
         if self.stream_stopped or self.last_setpoint_time is None:
             return
         if time.monotonic() - self.last_setpoint_time < self.setpoint_timeout:
@@ -368,12 +367,15 @@ class CogIdNode(Node):
     # --- diagnostics -------------------------------------------------------------------------
 
     def publish_diagnostics(self):
+        health = self.closure_health(self.last_pose)   # solved outside the lock
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [self.diagnostic_status()]
+        with self.lock:
+            msg.status = [self.diagnostic_status(*health)]
         self.diagnostics_pub.publish(msg)
 
-    def diagnostic_status(self):
+    def diagnostic_status(self, residual, condition):
+        """The DiagnosticStatus of the node (``residual``, ``condition``: closure_health)."""
         status = DiagnosticStatus()
         status.name = f'{self.get_fully_qualified_name()}: inverse dynamics'
         status.hardware_id = self.mechanism.name
@@ -395,7 +397,6 @@ class CogIdNode(Node):
                 status.message = 'serving setpoints'
         self._period_problems = 0
         times = np.array(self.compute_times) * 1e6
-        residual, condition = self.closure_health()
         since = '' if self.last_setpoint_time is None else \
             f'{time.monotonic() - self.last_setpoint_time:.3f}'
         values = [
@@ -419,15 +420,15 @@ class CogIdNode(Node):
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values]
         return status
 
-    def closure_health(self):
-        """(closure residual, closure Jacobian condition number) at the last served pose.
+    def closure_health(self, pose):
+        """(closure residual, closure Jacobian condition number) at ``pose``, a served pose.
 
         Solved again here, once a report, so the per-setpoint path stays on the core's lean
-        single-sample call; the pose is the one just served, so the numbers are its own.
+        single-sample call; the pose is the last one served, so the numbers are its own.
         """
-        if self.last_pose is None:
+        if pose is None:
             return math.nan, math.nan
-        result = self.report_solver.evaluate(self.last_pose, on_invalid='skip')
+        result = self.report_solver.evaluate(pose, on_invalid='skip')
         return float(result.closure_residual[0]), float(result.condition_number[0])
 
 
@@ -494,6 +495,7 @@ def main(args=None):
         # pause (~10 ms on the reference VM) becomes microseconds.
         gc.collect()
         gc.freeze()
+        node.setpoint_loop.start()
         if stop.hand_over() is None:   # no stop asked for during start-up
             executor.spin()
     except (MechanismConfigError, rclpy.exceptions.InvalidParameterTypeException,
@@ -509,6 +511,7 @@ def main(args=None):
         # then fails on the dead context (an RCLError): a clean stop too
     finally:
         if node is not None:
+            node.setpoint_loop.stop()
             node.destroy_node()
         rclpy.try_shutdown()
     return 0

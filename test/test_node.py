@@ -521,6 +521,25 @@ def test_qos_override_applies_to_its_topic_only(nodes):
     assert info[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
 
 
+def test_incompatible_setpoint_publisher_is_reported_and_good_ones_still_served(nodes):
+    """A best-effort publisher cannot reach the reliable joint_setpoint subscription: the
+    node logs the mismatch (the subscription's QoS events are served by the setpoint
+    thread, beside its messages) and goes on serving the reliable publishers."""
+    procs, probes = nodes
+    probe = probes['d']
+    qos = control_qos()
+    qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    bad = probe.node.create_publisher(JointState, 'joint_setpoint', qos)
+    try:
+        assert procs['d'].wait_for_output('offering incompatible QoS', timeout=WAIT), \
+            procs['d'].output
+    finally:
+        probe.node.destroy_publisher(bad)
+    stamp = fresh_stamp()
+    probe.send(stamp, ['joint1'], [0.5])
+    assert probe.wait_effort(stamp).effort
+
+
 def call(node, srv_type, name, request):
     client = node.create_client(srv_type, name)
     try:
