@@ -1,27 +1,38 @@
 """Setpoint-to-command latency and lost messages of cog_id_node, beside an echo node.
 
     .venv/bin/python bench/bench_node_latency.py [--rates 1000 2000] [--duration 10]
-                                                 [--params-file config/paper_four_bar_a.yaml]
+        [--block 1] [--lean-echo] [--params-file config/paper_four_bar_a.yaml] [--json F]
 
-Starts two subprocesses on a DDS domain of its own (localhost only):
+Starts subprocesses on a DDS domain of its own (localhost only):
   * ``cog_id_node`` from the params file, in namespace /cog;
   * an echo node (this file with ``--echo``), in namespace /echo, that only copies the
-    setpoint's positions into a Float64MultiArray: the floor of rclpy on this machine.
-Both use the node's control QoS (reliable, keep-last ``CONTROL_QOS_DEPTH``) and a
-SingleThreadedExecutor. For each rate, a driver in this process plays the paper's target
-motion ``pi/2 + 0.5 sin(pi t)`` into each node in turn for ``--duration`` seconds (stamps on
-the nominal schedule) and takes the time from just before ``publish`` of a setpoint to the
-arrival of its ``effort_command``. The echo node's command carries the setpoint's sequence
-number (an extra joint, which cog_id_node ignores). cog_id_node's command carries only
-torques: the k-th command that arrives answers the k-th setpoint when every setpoint was
-answered (the topic is reliable and ordered, and every setpoint here is valid). A run
-that lost commands reports the loss and no percentiles. The driver subscribes to nothing
-else, so it is not the bottleneck at 2 kHz. Messages
-lost = setpoints sent - commands received after a 1 s drain. The first 100 answers of each
-run are left out of the percentiles (warm-up). After each cog_id_node run the node's own
-compute time per setpoint (receipt to publication, from its /diagnostics) is reported
-too, which separates the node's work from transport and executor. Not a test: it prints a table (and
-``--json`` writes one).
+    setpoint's positions into a Float64MultiArray from a plain rclpy callback on a
+    SingleThreadedExecutor: the floor of an ordinary rclpy node on this machine, and the
+    reference of the latency target;
+  * with ``--lean-echo``, the same echo served by the node's own dedicated setpoint loop
+    (cog_id_ros/setpoint_loop.py), in /lean: the floor of that loop, so the node's own
+    work shows as the difference to it.
+Every node uses the node's control QoS (reliable, keep-last ``CONTROL_QOS_DEPTH``).
+
+For each rate, a driver in this process (publishing from its main thread, receiving on
+threads of its own: it adds no executor of its own to what is measured) plays the paper's target motion
+``pi/2 + 0.5 sin(pi t)`` into the nodes in interleaved blocks of ``--block`` seconds (echo,
+cog, [lean], then the next round in the opposite order), ``--duration`` seconds per node
+in all, and takes the time from just before ``publish`` of a setpoint to the arrival of
+its ``effort_command``. This VM's speed drifts from one minute to the next; blocks a
+second apart see the same machine, so the difference of the medians is measured within
+each round and its median over the rounds is reported beside the pooled percentiles.
+
+The echo nodes' commands carry the setpoint's sequence number (an extra joint, which
+cog_id_node ignores). cog_id_node's command carries only torques: the k-th command of a
+block answers its k-th setpoint when every setpoint was answered (reliable and ordered;
+every setpoint here is valid). A block that lost commands counts the loss and gives no
+latencies. Messages lost = setpoints sent - commands received after a drain of 0.3 s per
+block. The first ``WARM_UP`` answers of each block are left out of the percentiles (a
+block starts a new stream: the node's estimator restarts). After each rate, cog_id_node's
+own compute time per setpoint (receipt to publication, from its /diagnostics) is reported
+too, which separates the node's work from transport and executor. Not a test: it prints
+a table (and ``--json`` writes the rows).
 """
 import argparse
 import json
@@ -36,11 +47,16 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 NS = 1_000_000_000
-WARM_UP = 100
+WARM_UP = 50
+DRAIN = 0.3
 
 
-def echo_main():
-    """The echo node: joint_setpoint positions -> effort_command, nothing else."""
+def echo_main(mode):
+    """An echo node: joint_setpoint positions -> effort_command, nothing else.
+
+    ``mode`` 'executor': a subscription callback on a SingleThreadedExecutor (plain rclpy);
+    'loop': the node's dedicated setpoint loop around the same copy.
+    """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from sensor_msgs.msg import JointState
@@ -57,7 +73,13 @@ def echo_main():
         out.data = msg.position
         pub.publish(out)
 
-    node.create_subscription(JointState, 'joint_setpoint', on_setpoint, control_qos())
+    loop = None
+    if mode == 'loop':
+        from cog_id_ros.setpoint_loop import SetpointLoop
+        loop = SetpointLoop(node, JointState, 'joint_setpoint', on_setpoint, control_qos())
+        loop.start()
+    else:
+        node.create_subscription(JointState, 'joint_setpoint', on_setpoint, control_qos())
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     print('echo node ready', flush=True)
@@ -66,14 +88,20 @@ def echo_main():
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        if loop is not None:
+            loop.stop()
         node.destroy_node()
         rclpy.try_shutdown()
 
 
 class Driver:
-    """Publishes setpoints on schedule and timestamps the answers, in one thread."""
+    """Publishes setpoints on schedule (main thread, sleeping between them) and timestamps
+    the answers (one SetpointLoop thread per command topic, outside any executor, so the
+    driver's own executor is not what is measured); /diagnostics on an executor thread."""
 
-    def __init__(self):
+    def __init__(self, namespaces):
+        import threading
+
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -82,35 +110,43 @@ class Driver:
         from std_msgs.msg import Float64MultiArray
 
         from cog_id_ros.node import control_qos
+        from cog_id_ros.setpoint_loop import SetpointLoop
 
         self.JointState = JointState
         self.node = rclpy.create_node('bench_driver', start_parameter_services=False)
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
         reader = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
                             reliability=ReliabilityPolicy.RELIABLE)
         self.pubs = {ns: self.node.create_publisher(JointState, f'{ns}/joint_setpoint',
-                                                    control_qos()) for ns in ('/echo', '/cog')}
-        self.node.create_subscription(Float64MultiArray, '/echo/effort_command',
-                                      self._on_echo, reader)
-        self.node.create_subscription(Float64MultiArray, '/cog/effort_command',
-                                      self._on_cog, reader)
-        self.recv = None
-        self.commands = []          # arrival times of cog_id_node's effort_command
+                                                    control_qos()) for ns in namespaces}
+        self.loops = [SetpointLoop(self.node, Float64MultiArray, f'{ns}/effort_command',
+                                   self._on_command, reader) for ns in namespaces]
+        self.recv = None            # arrival times by sequence number (echo nodes)
+        self.commands = []          # arrival times in order (cog_id_node)
         self.diagnostics = {}       # key -> value of cog_id_node's latest DiagnosticStatus
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
-        self.start_ns = 0
-        self.period_ns = 1
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        for loop in self.loops:
+            loop.start()
+        threading.Thread(target=self._spin, daemon=True).start()
 
-    def _on_echo(self, msg):
-        t = time.perf_counter()
-        if self.recv is not None:
-            self.recv[int(msg.data[-1])] = t
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:   # noqa: BLE001 (shutdown at the end of the run)
+            pass
 
-    def _on_cog(self, msg):
+    def close(self):
+        for loop in self.loops:
+            loop.stop()
+
+    def _on_command(self, msg):
         t = time.perf_counter()
         if self.recv is not None:
             self.commands.append(t)
+            data = msg.data
+            if len(data) == 3:       # an echo: the sequence number rides along
+                self.recv[int(data[-1])] = t
 
     def _on_diagnostics(self, msg):
         for status in msg.status:
@@ -121,71 +157,58 @@ class Driver:
         """cog_id_node's own median and max compute time per setpoint (its /diagnostics,
         over its last 1000 setpoints), from a report made after the run."""
         self.diagnostics = {}
-        self.spin_for(1.2)
+        time.sleep(1.2)
         get = self.diagnostics.get
         return float(get('compute_time_median_us') or 'nan'), float(get('compute_time_max_us') or 'nan')
-
-    def spin_for(self, seconds):
-        end = time.perf_counter() + seconds
-        while (left := end - time.perf_counter()) > 0:
-            self.executor.spin_once(timeout_sec=left)
 
     def wait_for(self, ns, timeout=30.0):
         end = time.perf_counter() + timeout
         while time.perf_counter() < end:
             if self.pubs[ns].get_subscription_count() > 0:
-                self.spin_for(0.5)
+                time.sleep(0.5)
                 return
-            self.spin_for(0.05)
+            time.sleep(0.05)
         raise RuntimeError(f'no subscriber on {ns}/joint_setpoint')
 
-    def run(self, ns, rate, duration):
-        """Play the target motion into ``ns`` at ``rate`` Hz; returns (sent, arrivals, late, matched)."""
-        n = int(rate * duration)
-        self.period_ns = int(round(NS / rate))
-        self.start_ns = self.node.get_clock().now().nanoseconds
+    def block(self, ns, rate, duration):
+        """Play the target motion into ``ns`` for ``duration`` s at ``rate`` Hz (a new
+        stream); returns (latencies in us after the warm-up, or None when commands were
+        lost, number sent, number lost)."""
+        n = int(round(rate * duration))
+        period_ns = int(round(NS / rate))
+        start_ns = self.node.get_clock().now().nanoseconds
         sent = np.zeros(n)
-        self.recv = np.full(n, np.nan)
         self.commands = []
-        late = np.zeros(n)
+        self.recv = np.full(n, np.nan)
         msg = self.JointState()
         msg.name = ['joint3', 'joint1', 'bench_seq']
         pub = self.pubs[ns]
         t0 = time.perf_counter()
         for i in range(n):
             t = i / rate
-            due = t0 + t
-            while (left := due - time.perf_counter()) > 0:
-                self.executor.spin_once(timeout_sec=left)
+            left = t0 + t - time.perf_counter()
+            if left > 0:
+                time.sleep(left)
             theta = math.pi / 2 + 0.5 * math.sin(math.pi * t)
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(
-                self.start_ns + i * self.period_ns, NS)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(start_ns + i * period_ns, NS)
             msg.position = [theta, theta, float(i)]
-            now = time.perf_counter()
-            late[i] = now - due
-            sent[i] = now
+            sent[i] = time.perf_counter()
             pub.publish(msg)
-        self.spin_for(1.0)
+        time.sleep(DRAIN)
         recv, self.recv = self.recv, None
-        if ns == '/echo':
-            return sent, recv, late, True
-        commands = np.array(self.commands)      # the k-th answers the k-th if none was lost
-        return sent, commands, late, len(commands) == n
+        commands = np.array(self.commands)
+        if ns != '/cog':
+            ok = ~np.isnan(recv)
+            return (recv - sent)[ok][WARM_UP:] * 1e6, n, int(n - ok.sum())
+        if commands.size != n:    # the k-th answers the k-th only when none was lost
+            return None, n, int(n - commands.size)
+        return (commands - sent)[WARM_UP:] * 1e6, n, 0
 
 
-def summarize(sent, recv, late, matched):
-    """Loss and latency percentiles of one run (no percentiles when commands were lost and
-    cannot be matched to their setpoints)."""
-    if matched:
-        ok = ~np.isnan(recv)
-        lost, lat = int((~ok).sum()), (recv - sent)[ok][WARM_UP:] * 1e6
-    else:
-        lost, lat = int(sent.size - len(recv)), np.array([])
+def percentiles(lat):
     p = np.percentile(lat, [50, 90, 99]) if lat.size else [math.nan] * 3
-    return {'sent': int(sent.size), 'lost': lost,
-            'p50_us': float(p[0]), 'p90_us': float(p[1]), 'p99_us': float(p[2]),
-            'max_us': float(lat.max()) if lat.size else math.nan,
-            'driver_late_p99_us': float(np.percentile(late, 99) * 1e6)}
+    return {'p50_us': float(p[0]), 'p90_us': float(p[1]), 'p99_us': float(p[2]),
+            'max_us': float(lat.max()) if lat.size else math.nan}
 
 
 def start(args, env, ready):
@@ -199,18 +222,53 @@ def start(args, env, ready):
     return proc
 
 
+def measure(driver, peers, rate, duration, block):
+    """Interleaved blocks at one rate: {label: row}, and per-round median differences."""
+    rounds = max(1, int(round(duration / block)))
+    lat = {label: [] for _, label in peers}
+    sent = {label: 0 for _, label in peers}
+    lost = {label: 0 for _, label in peers}
+    medians = []                          # per round: {label: block median}
+    for r in range(rounds):
+        order = peers if r % 2 == 0 else peers[::-1]
+        medians.append({})
+        for ns, label in order:
+            time.sleep(0.2)
+            values, n, n_lost = driver.block(ns, rate, duration / rounds)
+            sent[label] += n
+            lost[label] += n_lost
+            if values is not None and values.size:
+                lat[label].append(values)
+                medians[-1][label] = float(np.median(values))
+    rows = {}
+    for _, label in peers:
+        values = np.concatenate(lat[label]) if lat[label] else np.array([])
+        rows[label] = dict(node=label, rate_hz=rate, sent=sent[label], lost=lost[label],
+                           blocks=rounds, **percentiles(values))
+    return rows, medians
+
+
+def round_differences(medians, label, reference):
+    """Per-round difference of the block medians, label minus reference (us)."""
+    return [m[label] - m[reference] for m in medians if label in m and reference in m]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--echo', action='store_true', help=argparse.SUPPRESS)
+    parser.add_argument('--echo', choices=('executor', 'loop'), help=argparse.SUPPRESS)
     parser.add_argument('--rates', type=float, nargs='+', default=[1000.0, 2000.0])
-    parser.add_argument('--duration', type=float, default=10.0, help='s per run')
+    parser.add_argument('--duration', type=float, default=10.0, help='s per node and rate')
+    parser.add_argument('--block', type=float, default=1.0,
+                        help='s per block; the nodes take turns block by block')
+    parser.add_argument('--lean-echo', action='store_true',
+                        help="also run the echo on the node's dedicated setpoint loop")
     parser.add_argument('--params-file',
                         default=os.path.join(REPO, 'config', 'paper_four_bar_a.yaml'))
     parser.add_argument('--json', help='also write the results to this file')
     from rclpy.utilities import remove_ros_args
     args = parser.parse_args(remove_ros_args(sys.argv if argv is None else argv)[1:])
     if args.echo:
-        return echo_main()
+        return echo_main(args.echo)
 
     env = dict(os.environ)
     env.setdefault('ROS_DOMAIN_ID', str(102 + os.getpid() % 100))
@@ -218,34 +276,50 @@ def main(argv=None):
     env['PYTHONUNBUFFERED'] = '1'
     os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
     bindir = os.path.dirname(sys.executable)
+    me = os.path.abspath(__file__)
+    peers = [('/echo', 'echo node'), ('/cog', 'cog_id_node')]
     procs = [
-        start([sys.executable, os.path.abspath(__file__), '--echo', '--ros-args',
-               '-r', '__ns:=/echo'], env, 'echo node ready'),
+        start([sys.executable, me, '--echo', 'executor', '--ros-args', '-r', '__ns:=/echo'],
+              env, 'echo node ready'),
         start([os.path.join(bindir, 'cog_id_node'), '--ros-args', '--params-file',
                args.params_file, '-r', '__ns:=/cog', '-p', 'timeout_behavior:=none'], env,
               "mechanism '"),
     ]
+    if args.lean_echo:
+        peers.append(('/lean', 'echo on setpoint loop'))
+        procs.append(start([sys.executable, me, '--echo', 'loop', '--ros-args',
+                            '-r', '__ns:=/lean'], env, 'echo node ready'))
     import rclpy
     rclpy.init()
-    results = []
+    results, summary = [], []
+    driver = None
     try:
-        driver = Driver()
-        for ns in ('/echo', '/cog'):
+        driver = Driver([ns for ns, _ in peers])
+        for ns, _ in peers:
             driver.wait_for(ns)
         for rate in args.rates:
-            for ns, label in (('/echo', 'echo node'), ('/cog', 'cog_id_node')):
-                driver.spin_for(0.5)
-                row = summarize(*driver.run(ns, rate, args.duration))
-                row.update(node=label, rate_hz=rate)
-                if ns == '/cog':
-                    row['node_compute_p50_us'], row['node_compute_max_us'] = \
-                        driver.node_compute_time()
+            rows, medians = measure(driver, peers, rate, args.duration, args.block)
+            cog = rows['cog_id_node']
+            cog['node_compute_p50_us'], cog['node_compute_max_us'] = driver.node_compute_time()
+            for row in rows.values():
                 results.append(row)
-                print(f'{label:12s} {rate:6.0f} Hz: sent {row["sent"]:6d} lost {row["lost"]:5d}  '
-                      f'latency p50 {row["p50_us"]:7.0f} p90 {row["p90_us"]:7.0f} '
-                      f'p99 {row["p99_us"]:7.0f} max {row["max_us"]:7.0f} us  '
-                      f'(driver late p99 {row["driver_late_p99_us"]:.0f} us)', flush=True)
+                print(f'{row["node"]:22s} {rate:6.0f} Hz: sent {row["sent"]:6d} lost '
+                      f'{row["lost"]:5d}  latency p50 {row["p50_us"]:7.0f} p90 '
+                      f'{row["p90_us"]:7.0f} p99 {row["p99_us"]:7.0f} max {row["max_us"]:7.0f} us',
+                      flush=True)
+            for label in rows:
+                if label == 'echo node':
+                    continue
+                diffs = round_differences(medians, label, 'echo node')
+                summary.append(dict(rate_hz=rate, node=label, rounds=len(diffs),
+                                    median_diff_us=float(np.median(diffs)) if diffs else math.nan,
+                                    min_diff_us=min(diffs, default=math.nan),
+                                    max_diff_us=max(diffs, default=math.nan),
+                                    pooled_diff_us=rows[label]['p50_us'] - rows['echo node']['p50_us'],
+                                    lost=rows[label]['lost']))
     finally:
+        if driver is not None:
+            driver.close()
         rclpy.try_shutdown()
         for proc in procs:
             proc.send_signal(2)
@@ -253,19 +327,23 @@ def main(argv=None):
     print()
     print('| rate | node | sent | lost | p50 us | p90 us | p99 us | max us |')
     print('|---|---|---|---|---|---|---|---|')
-    by = {(r['rate_hz'], r['node']): r for r in results}
     for r in results:
         print(f"| {r['rate_hz']:.0f} Hz | {r['node']} | {r['sent']} | {r['lost']} | "
               f"{r['p50_us']:.0f} | {r['p90_us']:.0f} | {r['p99_us']:.0f} | {r['max_us']:.0f} |")
-    for rate in args.rates:
-        echo, cog = by[(rate, 'echo node')], by[(rate, 'cog_id_node')]
-        print(f'{rate:.0f} Hz: cog_id_node median latency {cog["p50_us"] - echo["p50_us"]:+.0f} us '
-              f'over the echo node (target <= +100 us); lost {cog["lost"]} (target 0); '
-              f'its own compute time per setpoint (diagnostics, last 1000): median '
-              f'{cog["node_compute_p50_us"]:.0f} us, max {cog["node_compute_max_us"]:.0f} us')
+    print()
+    print('median latency over the echo node, within each round of blocks (target <= +100 us):')
+    for s in summary:
+        print(f"  {s['rate_hz']:.0f} Hz {s['node']}: median {s['median_diff_us']:+.0f} us over "
+              f"{s['rounds']} rounds (range {s['min_diff_us']:+.0f} .. {s['max_diff_us']:+.0f}); "
+              f"pooled medians {s['pooled_diff_us']:+.0f} us; lost {s['lost']} (target 0)")
+    for r in results:
+        if r['node'] == 'cog_id_node':
+            print(f"  {r['rate_hz']:.0f} Hz cog_id_node's own compute time per setpoint "
+                  f"(diagnostics, last 1000): median {r['node_compute_p50_us']:.0f} us, "
+                  f"max {r['node_compute_max_us']:.0f} us")
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump(results, f, indent=1)
+            json.dump({'rows': results, 'differences': summary}, f, indent=1)
     return 0
 
 
