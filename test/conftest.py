@@ -11,6 +11,8 @@ Fixtures:
   rclpy_context  an initialised rclpy Context for the session (shut down at the end)
   ros_process    factory: start a ROS program as a subprocess; stopped with SIGINT at the end
                  of the test module (so a module starts its nodes once)
+
+and ``wait_until(predicate, timeout)`` for tests that wait on DDS traffic.
 """
 import os
 import signal
@@ -28,6 +30,17 @@ os.environ.pop('ROS_STATIC_PEERS', None)
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BIN = os.path.dirname(sys.executable)
+
+
+def wait_until(predicate, timeout=20.0):
+    """True once ``predicate()`` is true; polls every 10 ms for at most ``timeout`` s (an
+    upper bound, never reached when things work)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return predicate()
 
 
 @pytest.fixture(scope='session')

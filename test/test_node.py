@@ -28,6 +28,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
 import cog_id_ros  # noqa: E402
+from conftest import wait_until  # noqa: E402
 from cog_id_ros.node import control_qos  # noqa: E402
 from cog_id_ros.player import RECORDER_QOS, Player  # noqa: E402
 
@@ -108,15 +109,6 @@ class Probe:
 
 def _ns(stamp):
     return stamp.sec * NS + stamp.nanosec
-
-
-def wait_until(predicate, timeout=WAIT):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 def values(status):

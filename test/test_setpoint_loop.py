@@ -14,19 +14,8 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from cog_id_ros.node import control_qos  # noqa: E402
+from conftest import wait_until  # noqa: E402
 from cog_id_ros.setpoint_loop import SetpointLoop  # noqa: E402
-
-WAIT = 20.0
-
-
-def wait_until(predicate, timeout=WAIT):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
-
 
 @pytest.fixture
 def pair(rclpy_context, request):
