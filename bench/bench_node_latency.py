@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/bench_node_latency.py [--rates 1000 2000] [--duration 10]
         [--block 1] [--lean-echo] [--params-file config/paper_four_bar_a.yaml] [--json F]
+        [--compare DIR]
 
 Starts subprocesses on a DDS domain of its own (localhost only):
   * ``cog_id_node`` from the params file, in namespace /cog;
@@ -11,7 +12,10 @@ Starts subprocesses on a DDS domain of its own (localhost only):
     reference of the latency target;
   * with ``--lean-echo``, the same echo served by the node's own dedicated setpoint loop
     (cog_id_ros/setpoint_loop.py), in /lean: the floor of that loop, so the node's own
-    work shows as the difference to it.
+    work shows as the difference to it;
+  * with ``--compare DIR``, cog_id_node from the package in DIR (a checkout of another
+    commit, e.g. ``git worktree add /tmp/before <commit>``), in /before: before and after
+    a change in the same rounds.
 Every node uses the node's control QoS (reliable, keep-last ``CONTROL_QOS_DEPTH``).
 
 For each rate, a driver in this process (publishing from its main thread, receiving on
@@ -48,6 +52,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 NS = 1_000_000_000
 WARM_UP = 50
+ECHOES = ('/echo', '/lean')   # namespaces of the echo nodes (their answers carry a sequence number)
 DRAIN = 0.3
 
 
@@ -197,7 +202,7 @@ class Driver:
         time.sleep(DRAIN)
         recv, self.recv = self.recv, None
         commands = np.array(self.commands)
-        if ns != '/cog':
+        if ns in ECHOES:
             ok = ~np.isnan(recv)
             return (recv - sent)[ok][WARM_UP:] * 1e6, n, int(n - ok.sum())
         if commands.size != n:    # the k-th answers the k-th only when none was lost
@@ -262,6 +267,9 @@ def main(argv=None):
                         help='s per block; the nodes take turns block by block')
     parser.add_argument('--lean-echo', action='store_true',
                         help="also run the echo on the node's dedicated setpoint loop")
+    parser.add_argument('--compare', metavar='DIR',
+                        help='also run cog_id_node from the cog_id_ros package in DIR (a '
+                             'checkout of another commit), as one more node in the same rounds')
     parser.add_argument('--params-file',
                         default=os.path.join(REPO, 'config', 'paper_four_bar_a.yaml'))
     parser.add_argument('--json', help='also write the results to this file')
@@ -277,14 +285,19 @@ def main(argv=None):
     os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
     bindir = os.path.dirname(sys.executable)
     me = os.path.abspath(__file__)
+    node_args = ['--ros-args', '--params-file', args.params_file, '-p', 'timeout_behavior:=none']
     peers = [('/echo', 'echo node'), ('/cog', 'cog_id_node')]
     procs = [
         start([sys.executable, me, '--echo', 'executor', '--ros-args', '-r', '__ns:=/echo'],
               env, 'echo node ready'),
-        start([os.path.join(bindir, 'cog_id_node'), '--ros-args', '--params-file',
-               args.params_file, '-r', '__ns:=/cog', '-p', 'timeout_behavior:=none'], env,
+        start([os.path.join(bindir, 'cog_id_node'), *node_args, '-r', '__ns:=/cog'], env,
               "mechanism '"),
     ]
+    if args.compare:
+        root = os.path.abspath(args.compare)
+        peers.append(('/before', f'cog_id_node of {os.path.basename(root)}'))
+        procs.append(start([sys.executable, '-m', 'cog_id_ros.node', *node_args,
+                            '-r', '__ns:=/before'], dict(env, PYTHONPATH=root), "mechanism '"))
     if args.lean_echo:
         peers.append(('/lean', 'echo on setpoint loop'))
         procs.append(start([sys.executable, me, '--echo', 'loop', '--ros-args',
