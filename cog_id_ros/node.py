@@ -30,6 +30,9 @@ shared/design/mechanism-params.md) and the node's own, ``NODE_PARAMETERS`` below
 read once at start-up and are read-only afterwards. A parameter that cannot be honoured
 ends the process with exit status 2 and one line naming the parameter.
 
+Threads: ``joint_setpoint`` is served by a thread of its own (:mod:`cog_id_ros.setpoint_loop`),
+everything else by the executor in the main thread; shared state is under ``self.lock``.
+
 The physics is in :mod:`cog_id_ros.core`, the acceleration estimator in
 :mod:`cog_id_ros.setpoint_filter`, the message checks in :mod:`cog_id_ros.ros_conversions`.
 """
@@ -306,8 +309,9 @@ class CogIdNode(Node):
     def on_trajectory(self, msg):
         """A whole JointTrajectory -> effort_trajectory, in one vectorised core call.
 
-        Solved without the lock (its own selector and solver), so a long trajectory never
-        holds up the setpoint stream; only the bookkeeping takes the lock.
+        Solved without the lock (its own selector and solver), so the setpoint thread goes
+        on while a long trajectory is solved (the two threads share the GIL: a setpoint may
+        wait up to Python's switch interval, 5 ms); only the bookkeeping takes the lock.
         """
         try:
             _, q, qd, qdd = trajectory_arrays(msg, self.trajectory_selector)
