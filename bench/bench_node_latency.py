@@ -148,10 +148,11 @@ class Driver:
     def _on_command(self, msg):
         t = time.perf_counter()
         if self.recv is not None:
-            self.commands.append(t)
             data = msg.data
             if len(data) == 3:       # an echo: the sequence number rides along
                 self.recv[int(data[-1])] = t
+            else:                    # cog_id_node: torques only, matched by order
+                self.commands.append(t)
 
     def _on_diagnostics(self, msg):
         for status in msg.status:

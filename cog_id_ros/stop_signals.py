@@ -7,8 +7,8 @@ and the half-built object prints "Exception ignored in __del__" tracebacks at ex
 Blocking the two signals in the main thread (pthread_sigmask) does not prevent it: threads
 that exist before ``main()`` runs -- OpenBLAS starts one when numpy is imported, SciPy
 another -- do not block them, so the kernel delivers the signal there and rclpy's C
-handler runs at once (measured: 1 start in 3-10 with a signal right after the first log
-line). So the scripts start rclpy *without* its signal handlers and install Python-level
+handler runs at once (measured: the start-up signal test, 8 starts a run, failed in 2 of
+3 runs). So the scripts start rclpy *without* its signal handlers and install Python-level
 handlers that only note the signal (Python runs them in the main thread, whichever thread
 the kernel picked). Once everything exists, :meth:`DeferredStop.hand_over` installs
 rclpy's handlers and says whether a stop was asked for meanwhile::

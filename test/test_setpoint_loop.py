@@ -14,8 +14,9 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from cog_id_ros.node import control_qos  # noqa: E402
-from conftest import wait_until  # noqa: E402
 from cog_id_ros.setpoint_loop import SetpointLoop  # noqa: E402
+from conftest import wait_until  # noqa: E402
+
 
 @pytest.fixture
 def pair(rclpy_context, request):
