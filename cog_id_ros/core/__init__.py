@@ -7,10 +7,10 @@ Where the paper's equations live:
 and what they stand on: closure.py (loop equations, Newton), joint_motion.py (actuator to
 joint rates), kinematics.py (tree, poses, twists), spatial.py / lane_linalg.py (algebra).
 """
-from .errors import (ClosureError, CogIdError, MechanismConfigError, SetpointError,
+from .errors import (REASONS, ClosureError, CogIdError, MechanismConfigError, SetpointError,
                      SingularConfigurationError)
 from .inverse_dynamics import Evaluation, InverseDynamics
 from .mechanism import Mechanism
 
-__all__ = ['ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
+__all__ = ['REASONS', 'ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
            'MechanismConfigError', 'SetpointError', 'SingularConfigurationError']

@@ -1,8 +1,26 @@
-"""Exceptions of cog_id_ros: each carries what a user needs to act on it."""
+"""Exceptions of cog_id_ros: each carries what a user needs to act on it.
+
+Every error raised for a sample has a machine-readable ``reason`` (a key of
+:data:`REASONS`), so callers (the node, the offline tool) never search message text.
+"""
+
+#: why a sample (a setpoint, a trajectory point, a CSV row) could not be served
+REASONS = {
+    'malformed': 'wrong shape or type: not one number per active joint',
+    'non_finite': 'NaN or infinity in a position, velocity or acceleration',
+    'out_of_range': 'a finite value too large to compute with (the torques would overflow)',
+    'closure': 'the loops cannot be closed at this pose',
+    'singular': 'the pose is singular (closure Jacobian condition number too large)',
+    'inconsistent': 'redundant actuation: the active coordinates disagree with the loop closure',
+    'unreachable': 'the pose cannot be reached from the previous one by continuation',
+}
 
 
 class CogIdError(Exception):
     """Base class of every error raised by cog_id_ros."""
+
+    #: key of REASONS (None for errors that are not about a sample, e.g. configuration)
+    reason = None
 
 
 class MechanismConfigError(CogIdError, ValueError):
@@ -12,34 +30,47 @@ class MechanismConfigError(CogIdError, ValueError):
     starts with it: ``links.link2.mass: must be >= 0, got -1.0``.
     """
 
+    reason = 'config'
+
     def __init__(self, parameter, message):
         self.parameter = parameter
         super().__init__(f'{parameter}: {message}')
 
 
 class SetpointError(CogIdError, ValueError):
-    """A setpoint array that is malformed: wrong shape, NaN or Inf."""
+    """A setpoint that is malformed (wrong shape or type), not finite, or out of range.
 
-    def __init__(self, message, sample=None):
+    ``reason``: 'malformed', 'non_finite' or 'out_of_range'.
+    """
+
+    def __init__(self, message, sample=None, reason='malformed'):
+        assert reason in ('malformed', 'non_finite', 'out_of_range'), reason
         self.sample = sample
+        self.reason = reason
         super().__init__(message)
 
 
 class ClosureError(CogIdError):
     """The loops cannot be closed at this setpoint (``residual`` says by how much).
 
-    Also raised for a redundant setpoint that disagrees with the closure by more than
-    ``mechanism.setpoint_tolerance``; ``residual`` is then that disagreement.
+    ``reason`` 'closure'; 'unreachable' when the pose may exist but cannot be reached
+    from the previous one by continuation (too far, or across a dead centre);
+    'inconsistent' for a redundant setpoint that disagrees with the closure by more than
+    ``mechanism.setpoint_tolerance`` (``residual`` is then that disagreement).
     """
 
-    def __init__(self, message, residual, sample=None):
+    def __init__(self, message, residual, sample=None, reason='closure'):
+        assert reason in ('closure', 'unreachable', 'inconsistent'), reason
         self.residual = float(residual)
         self.sample = sample
+        self.reason = reason
         super().__init__(message)
 
 
 class SingularConfigurationError(CogIdError):
     """The closure Jacobian is (nearly) singular here: ``condition_number`` says how badly."""
+
+    reason = 'singular'
 
     def __init__(self, message, condition_number, sample=None):
         self.condition_number = float(condition_number)

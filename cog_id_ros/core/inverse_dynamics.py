@@ -323,7 +323,8 @@ class InverseDynamics:
                     joint = self.mechanism.active_joints[bad[0]]
                     where = f'{label} of {joint}' if single else f'sample {i}: {label} of {joint}'
                     errors[int(i)] = SetpointError(
-                        f'{where} is {array[i, bad[0]]}: setpoints must be finite', sample=int(i))
+                        f'{where} is {array[i, bad[0]]}: setpoints must be finite', sample=int(i),
+                        reason='non_finite')
                     break
         return finite, errors
 
@@ -334,7 +335,7 @@ class InverseDynamics:
         q, basis = self._state
         goals = self._continuation_goals(target)
         if goals is None:
-            raise SetpointError('setpoints must be finite', sample=sample)
+            raise SetpointError('setpoints must be finite', sample=sample, reason='non_finite')
         for k, goal in enumerate(goals, 1):
             step = self._closure_step(q, basis, goal, sp.ScalarOps)
             self._check(step, k == len(goals), sample)
@@ -440,7 +441,7 @@ class InverseDynamics:
             raise ClosureError(
                 f'{where}the redundant setpoint disagrees with the loop closure by '
                 f'{step.mismatch:.3g} (rad or m), more than mechanism.setpoint_tolerance '
-                f'{m.setpoint_tolerance:.3g}', step.mismatch, sample)
+                f'{m.setpoint_tolerance:.3g}', step.mismatch, sample, reason='inconsistent')
 
     # --- positions: a batch ----------------------------------------------------------------
 
