@@ -1,4 +1,4 @@
-"""Every configuration error of mechanism-params.md names its parameter."""
+"""Every configuration error of the mechanism parameter file (README) names its parameter."""
 import pytest
 
 import cog_id_ros

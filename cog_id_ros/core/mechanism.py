@@ -1,7 +1,7 @@
 """Mechanism: a validated description of links, joints and actuators, ready to solve.
 
-Built from the parameter file of shared/design/mechanism-params.md (``from_params_file``)
-or from the dotted names rclpy gives a node (``from_parameters``). Everything a user can get
+Built from a ROS 2 parameter file (``from_params_file``; README, "Mechanism parameter
+file", and docs/mechanism.md for limits and defaults) or from the dotted names rclpy gives a node (``from_parameters``). Everything a user can get
 wrong raises MechanismConfigError naming the parameter. At load the mechanism is assembled
 near ``initial_positions``, its degrees of freedom are read off the rank of the closure
 Jacobian there, and the actuators are checked to determine the motion.
@@ -32,7 +32,7 @@ RANK_TOLERANCE = 1e-9                  # relative singular value below which A l
 
 
 class Mechanism:
-    """Links, joints and actuators of a (closed-link) mechanism; see mechanism-params.md."""
+    """Links, joints and actuators of a (closed-link) mechanism; see docs/mechanism.md."""
 
     def __init__(self, params):
         reader = ParameterReader(params)
