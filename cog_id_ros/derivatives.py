@@ -21,7 +21,12 @@ acceleration columns:
 
 The public functions take ``t`` of shape (N,) and ``y`` of shape (N,) or (N, K) and
 return an array shaped like ``y``. They need ``N >= STENCIL`` samples and a strictly
-increasing ``t``; anything else raises ``ValueError``.
+increasing ``t``; anything else raises ``ValueError``. Any time unit works: each stencil
+is scaled by a power of two before its weights are computed (exact, so results do not
+change), and no floating-point warning is ever emitted; a derivative whose true value
+lies beyond the range of a double (e.g. positions that change by 1 over steps of 1e-300 s
+give accelerations of 1e600) comes out as +-inf or NaN, for the caller to check with
+``np.isfinite``.
 """
 
 import numpy as np
@@ -101,11 +106,22 @@ def derivative(t, y, order):
     if t.size >= 2 and not np.all(np.diff(t) > 0):
         raise ValueError('t must be strictly increasing')
     idx = stencil_indices(t.size)
-    offsets = t[idx] - t[:, None]
-    w = fornberg_weights(offsets, order)
-    if y.ndim == 1:
-        return np.einsum('ij,ij->i', w, y[idx] - y[:, None])
-    return np.einsum('ij,ijk->ik', w, y[idx] - y[:, None, :])
+    with np.errstate(all='ignore'):
+        offsets = t[idx] - t[:, None]
+        # Scale each stencil by the power of two nearest its span, so the weights are
+        # computed on offsets of order 1 whatever the time unit: steps of 1e-300 s or
+        # 1e300 s no longer over/underflow inside the recurrence. Multiplying by a power
+        # of two is exact, so the result is bit-identical to the unscaled one whenever
+        # that one does not over/underflow. The weights of the scaled stencil are applied
+        # first and the power of two (2^-order*e) last, so only a derivative that is itself
+        # beyond the range of a double comes out infinite (never NaN, never a warning).
+        _, exponent = np.frexp(offsets[:, -1] - offsets[:, 0])
+        w = fornberg_weights(np.ldexp(offsets, -exponent[:, None]), order)
+        if y.ndim == 1:
+            d = np.einsum('ij,ij->i', w, y[idx] - y[:, None])
+            return np.ldexp(d, -order * exponent)
+        d = np.einsum('ij,ijk->ik', w, y[idx] - y[:, None, :])
+        return np.ldexp(d, -order * exponent[:, None])
 
 
 def first_derivative(t, y):

@@ -121,3 +121,25 @@ def test_rejects_what_it_cannot_differentiate():
         d.derivative(np.arange(5.0), np.zeros(5), 3)
     with pytest.raises(ValueError, match='shape'):
         d.derivative(np.arange(5.0), np.zeros(6), 1)
+
+
+
+@pytest.mark.parametrize('unit', [1e-300, 1e300 / 64])
+def test_any_time_unit_without_overflow_or_warnings(unit):
+    """Reliability item 20: steps of 1e-300 s or times of 1e300 s gave NaN and RuntimeWarnings.
+
+    The same motion in another time unit has the same derivatives in that unit; where the
+    true value lies beyond a double (1/unit^2 = 1e600 or 1e-596) the result is infinite
+    (never NaN) or underflows to (nearly) 0, and no floating-point warning is raised."""
+    t0 = grid('random', 32, length=2.0)
+    y = f(t0)
+    t = t0 * unit
+    with np.errstate(all='raise'):          # any floating-point warning would raise here
+        v = d.first_derivative(t, y)
+        a = d.second_derivative(t, y)
+    np.testing.assert_allclose(v * unit, d.first_derivative(t0, y), rtol=1e-12, atol=1e-12)
+    assert not np.isnan(a).any()
+    if unit < 1:
+        assert np.all(np.isinf(a[np.abs(d.second_derivative(t0, y)) > 1e-6]))
+    else:
+        assert np.all(np.abs(a) <= 1e-300)
