@@ -9,8 +9,15 @@ names rclpy gives the node, so the same dict feeds ``Mechanism.from_parameters``
 The typed getters below turn anything a user can write (YAML integers where floats are
 meant, tuples, numpy arrays) into plain Python values, and raise MechanismConfigError naming
 the parameter for anything else.
+
+Whatever the file or dict holds, only MechanismConfigError comes out of here: nulls, numbers
+too large for a float, text that is not UTF-8, recursive or exponentially nested YAML aliases
+(a "billion laughs" document) and nesting deeper than ``MAX_DEPTH`` are refused with the
+parameter's name (or ``params_file``), in time proportional to the size of the file. Values
+are quoted in messages with a bounded ``show`` so that no message can grow without limit.
 """
 import math
+import reprlib
 
 import yaml
 
@@ -18,14 +25,69 @@ from .errors import MechanismConfigError
 
 DEFAULT_NODE_NAME = 'cog_id_node'
 
+#: most parameters a file or dict may expand to (far above any mechanism within the size
+#: limits of mechanism.py); more is refused before anything is built from them
+MAX_PARAMETERS = 100_000
+#: deepest nesting of mappings (the mechanism's parameters are three levels deep)
+MAX_DEPTH = 16
+#: most entries of one list value (the longest lists are one entry per joint)
+MAX_LIST_LENGTH = 100_000
 
-def flatten(tree, prefix=''):
-    """{'a': {'b': 1}} -> {'a.b': 1}; dotted keys that are already flat pass through."""
+_SHOW = reprlib.Repr()
+_SHOW.maxstring = 60
+_SHOW.maxother = 60
+_SHOW.maxlevel = 3
+_SHOW.maxlist = _SHOW.maxtuple = _SHOW.maxdict = _SHOW.maxset = 8
+
+
+def show(value):
+    """A bounded repr for messages: never expands a huge, nested or recursive value."""
+    try:
+        return _SHOW.repr(value)
+    except Exception:  # noqa: BLE001 -- a value whose repr fails is still shown somehow
+        return f'<{type(value).__name__}>'
+
+
+def flatten(tree, prefix='', source='parameters'):
+    """{'a': {'b': 1}} -> {'a.b': 1}; dotted keys that are already flat pass through.
+
+    Keys must be strings. A mapping that contains itself (a recursive YAML alias), nesting
+    deeper than MAX_DEPTH or more than MAX_PARAMETERS names (aliases nested inside each
+    other expand exponentially) raise MechanismConfigError naming ``source`` or the
+    parameter, after at most MAX_PARAMETERS steps.
+    """
     flat = {}
-    for key, value in tree.items():
-        name = f'{prefix}{key}'
+    stack = [(iter(tree.items()), prefix, 0)]
+    open_ids = [id(tree)]
+    steps = 0
+    while stack:
+        items, pre, depth = stack[-1]
+        item = next(items, None)
+        if item is None:
+            stack.pop()
+            open_ids.pop()
+            continue
+        key, value = item
+        steps += 1
+        if steps > MAX_PARAMETERS:
+            raise MechanismConfigError(
+                source, f'expands to more than {MAX_PARAMETERS} parameters (nested YAML '
+                        f'aliases?); write each parameter out once')
+        if not isinstance(key, str) or not key:
+            raise MechanismConfigError(
+                pre.rstrip('.') or source,
+                f'parameter names must be non-empty strings, got {show(key)}')
+        name = f'{pre}{key}'
         if isinstance(value, dict):
-            flat.update(flatten(value, name + '.'))
+            if id(value) in open_ids:
+                raise MechanismConfigError(
+                    name, 'contains itself (a recursive YAML alias); write the values out')
+            if depth + 1 >= MAX_DEPTH:
+                raise MechanismConfigError(
+                    name, f'nested more than {MAX_DEPTH} levels deep; the mechanism '
+                          f'parameters are three levels deep (e.g. links.link1.mass)')
+            stack.append((iter(value.items()), name + '.', depth + 1))
+            open_ids.append(id(value))
         else:
             flat[name] = value
     return flat
@@ -48,9 +110,21 @@ def load_params_file(path, node_name=DEFAULT_NODE_NAME):
         with open(path, encoding='utf-8') as stream:
             document = yaml.safe_load(stream)
     except OSError as exc:
-        raise MechanismConfigError('params_file', f'cannot read {path}: {exc.strerror}') from exc
+        raise MechanismConfigError(
+            'params_file', f'cannot read {path}: {exc.strerror or exc}') from exc
+    except UnicodeDecodeError as exc:
+        raise MechanismConfigError(
+            'params_file', f'{path} is not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at '
+                           f'offset {exc.start}); save it with UTF-8 encoding') from None
     except yaml.YAMLError as exc:
         raise MechanismConfigError('params_file', f'{path} is not valid YAML: {exc}') from exc
+    except RecursionError:
+        raise MechanismConfigError(
+            'params_file', f'{path} is nested too deeply to read; the mechanism parameters '
+                           f'are three levels deep under ros__parameters') from None
+    except (ValueError, OverflowError) as exc:   # e.g. a YAML timestamp out of range
+        raise MechanismConfigError(
+            'params_file', f'{path} holds a value YAML cannot represent: {exc}') from None
     if not isinstance(document, dict):
         raise MechanismConfigError('params_file', f'{path} holds no node entries')
     wildcard, own = {}, {}
@@ -60,8 +134,9 @@ def load_params_file(path, node_name=DEFAULT_NODE_NAME):
             continue
         if not isinstance(body, dict) or not isinstance(body.get('ros__parameters'), dict):
             raise MechanismConfigError(
-                'params_file', f'{path}: entry {entry!r} has no ros__parameters mapping')
-        (wildcard if kind == 'wildcard' else own).update(flatten(body['ros__parameters']))
+                'params_file', f'{path}: entry {show(entry)} has no ros__parameters mapping')
+        (wildcard if kind == 'wildcard' else own).update(
+            flatten(body['ros__parameters'], source='params_file'))
     if not wildcard and not own:
         raise MechanismConfigError(
             'params_file', f"{path} has no entry for node '{node_name}' or '/**'")
@@ -74,8 +149,7 @@ class ParameterReader:
     """Typed access to a dotted-name dict; every error names the parameter."""
 
     def __init__(self, params):
-        self.params = flatten(params) if any(isinstance(v, dict) for v in params.values()) \
-            else dict(params)
+        self.params = flatten(params)
         self.used = set()
 
     def has(self, name):
@@ -87,12 +161,17 @@ class ParameterReader:
                 raise MechanismConfigError(name, 'missing')
             return default
         self.used.add(name)
-        return self.params[name]
+        value = self.params[name]
+        if value is None:
+            raise MechanismConfigError(
+                name, 'has no value (~ or null); give a value or delete the line'
+                      + ('' if required else ' to use the default'))
+        return value
 
     def string(self, name, default=None, required=False):
         value = self.raw(name, default, required)
         if value is not None and not isinstance(value, str):
-            raise MechanismConfigError(name, f'must be a string, got {value!r}')
+            raise MechanismConfigError(name, f'must be a string, got {show(value)}')
         return value
 
     def number(self, name, default=None, required=False):
@@ -104,13 +183,16 @@ class ParameterReader:
         if value is None:
             return None
         if isinstance(value, str) or not _is_sequence(value):
-            raise MechanismConfigError(name, f'must be a list of names, got {value!r}')
-        names = []
+            raise MechanismConfigError(name, f'must be a list of names, got {show(value)}')
+        _check_length(name, value)
+        names, seen = [], set()
         for item in value:
             if not isinstance(item, str) or not item:
-                raise MechanismConfigError(name, f'must be a list of names, got {item!r} in it')
-            if item in names:
+                raise MechanismConfigError(
+                    name, f'must be a list of names, got {show(item)} in it')
+            if item in seen:
                 raise MechanismConfigError(name, f"duplicate name '{item}'")
+            seen.add(item)
             names.append(item)
         return names
 
@@ -119,7 +201,8 @@ class ParameterReader:
         if value is None:
             return None if default is None else tuple(float(x) for x in default)
         if isinstance(value, str) or not _is_sequence(value):
-            raise MechanismConfigError(name, f'must be a list of numbers, got {value!r}')
+            raise MechanismConfigError(name, f'must be a list of numbers, got {show(value)}')
+        _check_length(name, value)
         numbers = tuple(as_float(name, x) for x in value)
         if length is not None and len(numbers) != length:
             raise MechanismConfigError(name, f'must have {length} entries, got {len(numbers)}')
@@ -130,15 +213,35 @@ class ParameterReader:
 
 
 def _is_sequence(value):
-    return isinstance(value, (list, tuple)) or (hasattr(value, '__len__') and hasattr(value, '__iter__'))
+    if isinstance(value, (list, tuple)):
+        return True
+    if isinstance(value, (dict, set, frozenset, bytes, bytearray)):
+        return False
+    return hasattr(value, '__len__') and hasattr(value, '__iter__')
+
+
+def _check_length(name, value):
+    try:
+        length = len(value)
+    except Exception:  # noqa: BLE001 -- e.g. a 0-d numpy array
+        raise MechanismConfigError(name, f'must be a list, got {show(value)}') from None
+    if length > MAX_LIST_LENGTH:
+        raise MechanismConfigError(
+            name, f'has {length} entries, more than the supported {MAX_LIST_LENGTH}')
 
 
 def as_float(name, value):
     if isinstance(value, bool) or not isinstance(value, (int, float)) and not _is_number_like(value):
-        raise MechanismConfigError(name, f'must be a number, got {value!r}')
-    number = float(value)
+        raise MechanismConfigError(name, f'must be a number, got {show(value)}')
+    try:
+        number = float(value)
+    except OverflowError:
+        digits = int(value.bit_length() * math.log10(2)) + 1
+        raise MechanismConfigError(
+            name, f'must be a finite number, got an integer of about {digits} digits, too '
+                  f'large for a float') from None
     if not math.isfinite(number):
-        raise MechanismConfigError(name, f'must be finite, got {number!r}')
+        raise MechanismConfigError(name, f'must be a finite number, got {number!r}')
     return number
 
 
