@@ -116,3 +116,150 @@ def test_assembly_holds_the_actuators_at_their_initial_positions():
     rounded = with_changes(from_yaml('config/paper_four_bar_b.yaml'),
                            mechanism__initial_positions=[1.5708, -1.5708, 1.5707, 1.5708])
     assert cog_id_ros.Mechanism.from_parameters(rounded).dof == 1
+
+
+# --- Reliability item 4: whatever a file or dict holds, only MechanismConfigError, fast ------
+
+LOAD_CHILD = r'''
+import json, sys, time
+import cog_id_ros
+start = time.perf_counter()
+try:
+    cog_id_ros.Mechanism.from_params_file(sys.argv[1])
+    out = {'type': None}
+except BaseException as exc:  # noqa: BLE001 -- report whatever came out
+    out = {'type': type(exc).__name__, 'parameter': getattr(exc, 'parameter', None),
+           'message': str(exc)[:500]}
+out['seconds'] = time.perf_counter() - start
+print(json.dumps(out))
+'''
+
+
+def _paper_a_text():
+    with open(PAPER_A, encoding='utf-8') as f:
+        return f.read()
+
+
+def _laughs(key, depth=11):
+    """YAML lines of a 'billion laughs' list: 10**depth leaves from a few hundred bytes."""
+    lines = f'      {key}: &{key}0 [a, a, a, a, a, a, a, a, a, a]\n'
+    for i in range(1, depth):
+        lines += f'      {key}{i}: &{key}{i} [' + ', '.join([f'*{key}{i - 1}'] * 10) + ']\n'
+    return lines
+
+
+def _laughs_map(depth=10):
+    lines = '    junk0: &m0 {a: 1, b: 1, c: 1, d: 1, e: 1, f: 1, g: 1, h: 1, i: 1, j: 1}\n'
+    for i in range(1, depth):
+        lines += f'    junk{i}: &m{i} {{' + ', '.join(f'k{c}: *m{i - 1}' for c in range(10)) + '}\n'
+    return lines
+
+
+BAD_FILES = {
+    # name: (text edit of paper_four_bar_a.yaml, parameter the error must name)
+    'null mass': (lambda t: t.replace('        mass: 1.0\n', '        mass: ~\n', 1),
+                  'links.link1.mass'),
+    'null closure_tolerance': (
+        lambda t: t.replace('      name: paper_four_bar_a\n',
+                            '      name: paper_four_bar_a\n      closure_tolerance: ~\n'),
+        'mechanism.closure_tolerance'),
+    '400-digit integer': (lambda t: t.replace('        mass: 1.0\n', '        mass: ' + '9' * 400 + '\n', 1),
+                          'links.link1.mass'),
+    'recursive alias': (lambda t: t.replace('    links:\n', '    links: &l\n      loop: *l\n', 1),
+                        'links.loop'),
+    'billion laughs in a list': (
+        lambda t: t.replace('      name: paper_four_bar_a\n', _laughs('n') + '      name: *n10\n'),
+        'mechanism.name'),
+    'billion laughs in mappings': (lambda t: t.replace('    links:\n', _laughs_map() + '    links:\n', 1),
+                                   'params_file'),
+    'nesting 5000 deep': (lambda t: t.replace('      gravity: [0.0, -9.81, 0.0]',
+                                              '      gravity: ' + '[' * 5000 + ']' * 5000),
+                          'params_file'),
+}
+
+
+def _run_load(path):
+    import json
+    import subprocess
+    import sys
+    try:
+        done = subprocess.run([sys.executable, '-c', LOAD_CHILD, str(path)], capture_output=True,
+                              text=True, timeout=30, cwd='.')
+    except subprocess.TimeoutExpired:
+        pytest.fail(f'loading {path} did not finish within 30 s')
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize('case', sorted(BAD_FILES))
+def test_bad_file_values_are_config_errors_within_two_seconds(case, tmp_path):
+    """Reliability item 4: nulls, a 400-digit integer, recursive and exponential ("billion
+    laughs") YAML aliases, absurd nesting: MechanismConfigError naming the parameter (or
+    params_file) within 2 s, never TypeError, OverflowError, RecursionError or a hang."""
+    edit, parameter = BAD_FILES[case]
+    text = edit(_paper_a_text())
+    assert text != _paper_a_text()
+    path = tmp_path / 'bad.yaml'
+    path.write_text(text, encoding='utf-8')
+    out = _run_load(path)
+    assert out['type'] == 'MechanismConfigError', out
+    if parameter is not None:
+        assert out['parameter'] == parameter, out
+    assert out['message'].startswith(out['parameter'] + ': ')
+    assert out['seconds'] < 2.0, out
+
+
+def test_a_latin1_file_is_a_config_error_naming_the_file(tmp_path):
+    """Reliability item 4: a file that is not UTF-8 is MechanismConfigError on params_file
+    that says to save it as UTF-8, not UnicodeDecodeError."""
+    path = tmp_path / 'latin1.yaml'
+    path.write_bytes(_paper_a_text().replace('name: paper_four_bar_a', 'name: m\u00e9canisme')
+                     .encode('latin-1'))
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_params_file(str(path))
+    assert info.value.parameter == 'params_file'
+    assert 'UTF-8' in str(info.value)
+
+
+def _recursive_dict():
+    d = {}
+    d['x'] = d
+    return d
+
+
+def _nested(depth):
+    d = {'mass': 1.0}
+    for _ in range(depth):
+        d = {'a': d}
+    return d
+
+
+ODD_DICTS = {
+    'None mass': {'links.link1.mass': None},
+    'None closure_tolerance': {'mechanism.closure_tolerance': None},
+    'huge int mass': {'links.link1.mass': 10 ** 400},
+    'huge int in a vector': {'links.link1.com': [10 ** 400, 0, 0]},
+    'huge int gravity': {'mechanism.gravity': [0, -(10 ** 309), 0]},
+    'recursive dict': {'links': _recursive_dict()},
+    'deeply nested dict': {'links': {'link1': _nested(5000)}},
+    'non-string key': {7: 1.0},
+    'tuple key': {('links', 'link1'): 1.0},
+    'set as names': {'mechanism.active_joints': {'joint3'}},
+    'bytes as vector': {'links.link1.com': b'abc'},
+}
+
+
+@pytest.mark.parametrize('case', sorted(ODD_DICTS))
+def test_from_parameters_raises_only_config_errors(case):
+    """Reliability item 4: Mechanism.from_parameters with None, huge integers, nested or
+    recursive dicts and non-string keys raises MechanismConfigError only."""
+    params = dict(from_yaml(PAPER_A))
+    changes = ODD_DICTS[case]
+    for key, value in changes.items():
+        if isinstance(key, str) and isinstance(value, dict) and key in ('links',):
+            params = {k: v for k, v in params.items() if not k.startswith('links.link1.')}
+        params[key] = value
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert str(info.value).startswith(info.value.parameter + ': ')
+    assert len(str(info.value)) < 1000
