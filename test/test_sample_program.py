@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
+from cog_id_ros.core.continuation import prediction
 from cog_id_ros.core.sample_program import SampleProgram
 from cog_id_ros.core.straight_line import Graph, Sym, SymOps, compile_function
 from mechanisms import four_bar, from_yaml
@@ -40,8 +41,8 @@ class Counting:
             self.stepped += 1
         return done
 
-    def torques(self, *args):
-        done = self.program.torques(*args)
+    def solve(self, *args):
+        done = self.program.solve(*args)
         if done is None:
             self.handed_over += 1
         else:
@@ -75,8 +76,8 @@ def test_unrolled_step_is_the_glue_to_the_last_bit(name):
     for k in range(0, 2001, 2):
         target, v, a = q[k].tolist(), qd[k].tolist(), qdd[k].tolist()
         state = fast._state
-        stepped = program.step(state, target, v, a, fast.continuation_step)
-        looped = program.torques(state, target, v, a)
+        stepped = program.step(state, target, v, a, fast._limits, fast._bounds)
+        looped = program.solve(prediction(fast.mechanism, state, target)[0], v, a)
         if stepped is not None:
             served += 1
             assert list(stepped[0]) == list(looped[0]), k
@@ -99,7 +100,7 @@ def test_singular_and_unreachable_poses_raise_the_general_errors_and_keep_the_st
     fast, _ = solvers(from_yaml('config/paper_four_bar_a.yaml'))
     fast.torques([0.05], [0.0], [0.0])
     state = fast._state
-    assert fast._program.torques(state, [0.0], [0.0], [0.0]) is None
+    assert fast._program.solve(prediction(fast.mechanism, state, [0.0])[0], [0.0], [0.0]) is None
     with pytest.raises(cog_id_ros.SingularConfigurationError):
         fast.torques([0.0], [0.0], [0.0])
     assert fast._state is state

@@ -122,7 +122,7 @@ def solve_closure(model, q, free, ops, tol, max_iter=30, max_step=0.5):
         step = sol.lsq.solve(residual)
         size = ops.maxabs(step)
         if scalar:
-            if size != size or size < 1e-15 * (1.0 + ops.maxabs(q)):
+            if size != size or size < 1e-15 * (1.0 + ops.maxabs([q[j] for j in free])):
                 break                           # NaN, or stagnated: no reachable closure
             factor = min(1.0, max_step / size) if size > 0 else 1.0
         else:

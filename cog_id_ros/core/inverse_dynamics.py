@@ -11,6 +11,7 @@ One sample runs on Python floats (lean enough for a control loop); a batch runs 
 same code on numpy arrays of shape (N,), vectorised over samples. Successive calls keep
 the assembly branch: each solve is warm-started from the previous one.
 """
+import heapq
 import math
 
 import numpy as np
@@ -24,6 +25,9 @@ from .joint_motion import (active_velocity_map, closure_drift, combine, projecti
 from .kinematics import link_bias_accelerations, link_twists
 from .lane_linalg import solve_spd
 from .newton_euler import newton_euler_force, rotated_inertia_times
+from .continuation import (MAX_ANGLE, MAX_STEPS, MIN_STEP, actuator_ratio, correction_bounds, correction_ok,
+                           fits_one_step, intermediate_goal, joint_step_limits, prediction,
+                           revolute_active, step_ratio, wrapped_state)
 from .sample_program import SampleProgram
 
 
@@ -102,15 +106,16 @@ class InverseDynamics:
     (N, M) for N samples. Angles are never wrapped.
     """
 
-    #: largest step (rad or m, any actuator) taken at once; longer moves are followed in
-    #: steps of this size so that the solver stays on the assembly branch it is on
+    #: largest motion of any joint in one continuation step: rad, or for prismatic joints
+    #: this times the mechanism's length scale (continuation.py); longer moves are followed
+    #: in steps so that the solver stays on the assembly branch it is on. Read at construction.
     continuation_step = 0.1
-    #: largest change of any joint coordinate (rad or m) between the interpolated start and
-    #: the solution, in the vectorised batch solve, before a sample is re-solved serially
-    batch_jump_limit = 0.5
 
     def __init__(self, mechanism):
         self.mechanism = mechanism
+        self._limits = joint_step_limits(mechanism, self.continuation_step)
+        self._bounds = correction_bounds(self._limits)
+        self._wrapping = revolute_active(mechanism)
         self._program = _sample_program(self)
         self.reset()
 
@@ -131,18 +136,13 @@ class InverseDynamics:
         """
         sample = self._one_sample(q, qd, qdd)
         if sample is not None:                       # the control-rate path: plain floats
-            done = self._program_serial(*sample)      # straight-line code (sample_program.py)
-            if done is not None:
-                return np.array(done)
-            step = self._solve_serial(sample[0])
-            return np.array(self._torques(step, sample[1], sample[2], sp.ScalarOps))
+            return np.array(self._serve_one(*sample))
         q, qd, qdd, single = self._inputs(q, qd, qdd)
         if single:
             _, errors = self._check_finite(q, qd, qdd, single)
             if errors:
                 raise errors[0]
-            step = self._solve_serial(q[0].tolist())
-            return np.array(self._torques(step, qd[0].tolist(), qdd[0].tolist(), sp.ScalarOps))
+            return np.array(self._serve_one(q[0].tolist(), qd[0].tolist(), qdd[0].tolist()))
         return self._evaluate(q, qd, qdd, 'raise').torques
 
     def sample_torques(self, q, qd, qdd):
@@ -158,11 +158,11 @@ class InverseDynamics:
             try:
                 n = len(self.mechanism.active_joints)
                 if len(q) == len(qd) == len(qdd) == n:
-                    done = program.step(self._state, q, qd, qdd, self.continuation_step)
+                    done = program.step(self._state, q, qd, qdd, self._limits, self._bounds)
                     if done is not None:
                         self._state = done[1]
                         return done[0]
-            except TypeError:      # None or a non-number somewhere: torques() reports it
+            except (TypeError, OverflowError):   # not a float somewhere: torques() reports it
                 pass
         return self.torques(q, qd, qdd).tolist()
 
@@ -176,9 +176,13 @@ class InverseDynamics:
 
     def solve_positions(self, q):
         """Every joint coordinate (mechanism.joints order): (n_joints,) or (N, n_joints)."""
-        q, _, _, single = self._inputs(q, None, None)
+        q, qd, _, single = self._inputs(q, None, None)
+        _, errors = self._check_finite(q, qd, qd, single)
+        if errors:
+            raise errors[min(errors)]
         if single:
-            return np.array(self._solve_serial(q[0].tolist()).sol.q)
+            step, self._state = self._solve_serial(q[0].tolist())
+            return np.array(step.sol.q)
         return self._solve_batch(q, 'raise')[1]
 
     def cog_poses(self, q):
@@ -262,142 +266,204 @@ class InverseDynamics:
     # --- inputs ---------------------------------------------------------------------------
 
     def _inputs(self, q, qd, qdd):
+        """(q, qd, qdd) as float arrays of shape (N, M), and whether it was one sample.
+
+        ``q`` is required; ``qd`` and ``qdd`` default to zeros. One sample is (M,), or a
+        plain number when M = 1. Raises SetpointError (reason 'malformed') for anything else.
+        """
         names = self.mechanism.active_joints
-        arrays = []
-        for label, value in (('q', q), ('qd', qd), ('qdd', qdd)):
-            if value is None:
-                arrays.append(None)
-                continue
-            try:
-                array = np.asarray(value, dtype=float)
-            except (TypeError, ValueError) as exc:
-                raise SetpointError(f'{label}: not numeric ({exc})') from exc
-            arrays.append(array)
+        m = len(names)
+        if q is None:
+            raise SetpointError(f'q: required, one position per active joint {names}')
+        arrays = [_float_array(label, value, m) if value is not None else None
+                  for label, value in (('q', q), ('qd', qd), ('qdd', qdd))]
         single = arrays[0].ndim == 1
         out = []
         for label, array in zip(('q', 'qd', 'qdd'), arrays):
             if array is None:
-                out.append(np.zeros((1 if single else arrays[0].shape[0], len(names))))
+                out.append(np.zeros((1 if single else arrays[0].shape[0], m)))
                 continue
-            if array.ndim != (1 if single else 2) or array.shape[-1] != len(names) or \
+            if array.ndim != (1 if single else 2) or array.shape[-1] != m or \
                     (not single and array.shape[0] != arrays[0].shape[0]):
-                expected = f'({len(names)},)' if single else f'({arrays[0].shape[0]}, {len(names)})'
+                expected = f'({m},)' if single else f'({arrays[0].shape[0]}, {m})'
                 raise SetpointError(
                     f'{label}: expected shape {expected} (active joints {names}), got {array.shape}')
             out.append(array.reshape(1, -1) if single else array)
         return out[0], out[1], out[2], single
 
     def _one_sample(self, q, qd, qdd):
-        """(q, qd, qdd) as lists of finite floats when they are one well-formed sample, else
-        None (the general path then reports what is wrong)."""
+        """(q, qd, qdd) as lists of floats when they are one well-formed sample in range,
+        else None (the general path then reports what is wrong)."""
         m = len(self.mechanism.active_joints)
         out = []
         for value in (q, qd, qdd):
             if value is None:
+                if not out:
+                    return None                       # q is required
                 out.append([0.0] * m)
                 continue
             if type(value) is np.ndarray:            # a row of a float array: one C call
                 if value.ndim != 1 or value.dtype.kind != 'f':
                     return None
                 floats = value.tolist()
-            else:
-                if getattr(value, 'ndim', 1) != 1:
+            elif type(value) is list or type(value) is tuple:
+                if not all(type(x) is float or type(x) is int for x in value):
                     return None
                 try:
                     floats = [float(x) for x in value]
-                except (TypeError, ValueError):
+                except OverflowError:
                     return None
+            else:
+                return None
             if len(floats) != m or not all(map(math.isfinite, floats)):
                 return None
             out.append(floats)
+        if not all(-MAX_ANGLE <= out[0][a] <= MAX_ANGLE for a in self._wrapping):
+            return None
         return out
 
     def _check_finite(self, q, qd, qdd, single):
-        """SetpointError for the first non-finite entry; else None. Per sample: a bool array."""
+        """SetpointError for the first non-finite entry, or revolute position beyond
+        MAX_ANGLE; returns (per-sample bool array, {sample: error})."""
         finite = np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) & np.isfinite(qdd).all(axis=1)
+        wrapping = self._wrapping
+        in_range = (np.abs(q[:, wrapping]) <= MAX_ANGLE).all(axis=1) if wrapping else finite
         errors = {}
-        for i in np.flatnonzero(~finite):
+        for i in np.flatnonzero(~(finite & in_range)):
+            where = '' if single else f'sample {i}: '
             for label, array in (('q', q), ('qd', qd), ('qdd', qdd)):
                 bad = np.flatnonzero(~np.isfinite(array[i]))
                 if bad.size:
                     joint = self.mechanism.active_joints[bad[0]]
-                    where = f'{label} of {joint}' if single else f'sample {i}: {label} of {joint}'
                     errors[int(i)] = SetpointError(
-                        f'{where} is {array[i, bad[0]]}: setpoints must be finite', sample=int(i),
-                        reason='non_finite')
+                        f'{where}{label} of {joint} is {array[i, bad[0]]}: setpoints must be '
+                        f'finite', sample=int(i), reason='non_finite')
                     break
-        return finite, errors
+            else:
+                a = next(a for a in wrapping if not abs(q[i, a]) <= MAX_ANGLE)
+                errors[int(i)] = SetpointError(
+                    f'{where}q of {self.mechanism.active_joints[a]} is {q[i, a]:.6g} rad, beyond '
+                    f'+-{MAX_ANGLE:g} rad (there a float no longer holds an angle to better than '
+                    f'1e-7 rad): wrap or offset the angle', sample=int(i), reason='out_of_range')
+        return finite & in_range, errors
 
     # --- positions: one sample -------------------------------------------------------------
 
-    def _solve_serial(self, target, sample=None):
-        """Solve one sample from the warm start, in continuation steps if it is far away."""
-        q, basis = self._state
-        goals = self._continuation_goals(target)
-        if goals is None:
-            raise SetpointError('setpoints must be finite', sample=sample, reason='non_finite')
-        for k, goal in enumerate(goals, 1):
-            step = self._closure_step(q, basis, goal, sp.ScalarOps)
-            self._check(step, k == len(goals), sample)
-            q, basis = step.sol.q, step.basis
-        self._state = (q, basis)
-        return step
-
-    def _continuation_goals(self, target):
-        """The active setpoints to solve in turn from the warm start to ``target``: steps of
-        at most ``continuation_step``, ``target`` last; None if the distance is not finite."""
-        q = self._state[0]
-        start = [q[j] for j in self.mechanism.active_index]
-        distance = max(abs(t - s) for t, s in zip(target, start))
-        if not distance < math.inf:
-            return None
-        n_steps = max(1, math.ceil(distance / self.continuation_step - 1e-9))
-        return [[s + (t - s) * (k / n_steps) for s, t in zip(start, target)]
-                for k in range(1, n_steps)] + [target]
-
-    def _program_serial(self, target, qd, qdd):
-        """_solve_serial and the torques by the straight-line code, through the same
-        continuation steps; None (and the state unchanged) when it cannot serve a step."""
-        if self._program is None:
-            return None
-        step = self._program.step
-        if step is not None:        # the usual sample: one goal, at most two Newton steps
-            done = step(self._state, target, qd, qdd, self.continuation_step)
-            if done is not None:
-                tau, self._state = done
-                return tau
-        goals = self._continuation_goals(target)
-        if goals is None:
-            return None
-        state = self._state
-        for goal in goals:
-            done = self._program.torques(state, goal, qd, qdd)
-            if done is None:
-                return None
+    def _serve_one(self, target, qd, qdd, sample=None):
+        """Torques of one well-formed sample (lists of floats); the warm start moves on only
+        when they are served (finite)."""
+        done = self._program_serial(target, qd, qdd, sample)
+        if done is None:
+            step, state = self._solve_serial(target, sample)
+            tau = self._torques(step, qd, qdd, sp.ScalarOps)
+        else:
             tau, state = done
+        if not all(map(math.isfinite, tau)):
+            raise _out_of_range(qd, qdd, sample)
         self._state = state
         return tau
 
-    def _serial_positions(self, target, sample):
-        """Every joint coordinate at one sample (as _solve_serial.sol.q), by the straight-line
-        code when it can serve the sample."""
-        zeros = [0.0] * len(target)
-        if self._program_serial(target, zeros, zeros) is not None:
-            return self._state[0]
-        return self._solve_serial(target, sample=sample).sol.q
+    def _solve_serial(self, target, sample=None):
+        """(closure step, new state) at ``target`` by continuation from the warm start, on
+        the general lane path; raises the error of the first step that cannot be served.
+        The warm start itself is not changed."""
+        def solve(predicted, goal, final):
+            step = self._closure_step(predicted, goal, sp.ScalarOps)
+            self._check(step, final, sample)
+            return step, (step.sol.q, step.basis)
+        return self._follow(target, solve, sample)
 
-    def _closure_step(self, q, basis, target, ops):
-        """Close the loops with the primary actuators at ``target``, from ``q`` advanced by the
-        velocity basis (first-order predictor; skipped when basis is None); then, for redundant
-        actuation, move to the nearest configuration (W^-1 metric) to the full target."""
+    def _program_serial(self, target, qd, qdd, sample=None):
+        """(torques, new state) at ``target`` by the straight-line code (sample_program.py),
+        through the same continuation steps as _solve_serial; None when it cannot serve a
+        step (the general path then decides). The warm start is not changed."""
+        program = self._program
+        if program is None:
+            return None
+        if program.step is not None:    # the usual sample: one step, one or two Newton steps
+            done = program.step(self._state, target, qd, qdd, self._limits, self._bounds)
+            if done is not None:
+                return done
+
+        def solve(predicted, goal, final):
+            done = program.solve(predicted, qd, qdd)
+            if done is None:
+                raise _HandOver
+            return done
+        try:
+            return self._follow(target, solve, sample)
+        except _HandOver:
+            return None
+
+    def _follow(self, target, solve, sample):
+        """Continuation from the warm start to ``target`` (rules in continuation.py).
+
+        ``solve(predicted, goal, final)`` closes the loops from a prediction and returns
+        (result, new state); it raises ClosureError when Newton fails there. Returns the
+        last (result, new state)."""
+        m, limits = self.mechanism, self._limits
+        start = self._state
+        state = wrapped_state(m, self._wrapping, start, target)
+        if actuator_ratio(m, limits, state, target) > MAX_STEPS:
+            raise _unreachable(m, start, target, sample,
+                               f'it is more than {MAX_STEPS} continuation steps away')
+        cap = 1.0     # the largest step, in step limits (halved when a step fails)
+        for _ in range(MAX_STEPS):
+            predicted, moved = prediction(m, state, target)
+            if cap >= 1.0 and fits_one_step(m, limits, state, target, moved):
+                size, goal, final = 1.0, target, True
+            else:
+                ratio = step_ratio(m, limits, state, target, moved)
+                if ratio <= cap * (1.0 + 1e-9):      # (not a sliver of a step left over)
+                    size, goal, final = ratio, target, True
+                else:
+                    size, goal, final = cap, intermediate_goal(m, state, target, cap / ratio), False
+                    predicted, _ = prediction(m, state, goal)
+            try:
+                result, new_state = solve(predicted, goal, final)
+            except ClosureError as exc:
+                if final or exc.reason != 'closure' or cap < MIN_STEP:
+                    if final:
+                        raise
+                    raise _unreachable(m, start, target, sample,
+                                       f'the loops stop closing on the way, at {_fmt(goal)}') from None
+                cap = size / 2.0      # Newton failed on the way: try a shorter step
+                continue
+            except SingularConfigurationError as exc:
+                if final:
+                    raise
+                raise _unreachable(m, start, target, sample,
+                                   f'the way there passes a singular pose at {_fmt(goal)} '
+                                   f'(condition number {exc.condition_number:.3g})') from None
+            if not correction_ok(new_state[0], predicted, self._bounds):
+                if size / 2.0 < MIN_STEP:
+                    raise _unreachable(m, start, target, sample,
+                                       'the assembly branch cannot be followed there (Newton '
+                                       'corrections stay large even in short steps: a branch '
+                                       'point or dead centre)')
+                cap = size / 2.0      # Newton moved far from the prediction: maybe another branch
+                continue
+            if final:
+                return result, new_state
+            state, cap = new_state, min(1.0, cap * 2.0)
+        raise _unreachable(m, start, target, sample, f'not reached in {MAX_STEPS} continuation steps')
+
+    def _serial_positions(self, target, sample):
+        """Every joint coordinate at one sample (as _solve_serial), by the straight-line code
+        when it can serve the sample; the warm start moves there."""
+        zeros = [0.0] * len(target)
+        done = self._program_serial(target, zeros, zeros, sample)
+        state = self._solve_serial(target, sample)[1] if done is None else done[1]
+        self._state = state
+        return state[0]
+
+    def _closure_step(self, predicted, target, ops):
+        """Close the loops from the prediction ``predicted`` (primary actuators at their
+        targets), moving the other joints; then, for redundant actuation, move to the
+        nearest configuration (W^-1 metric) to the full ``target``."""
         m = self.mechanism
-        q = list(q)
-        if basis is not None:
-            dz = [target[a] - q[j] for a, j in zip(m.primary, m.primary_joints)]
-            q = [x + sum(b * d for b, d in zip(row, dz)) for x, row in zip(q, basis)]
-        for a, j in zip(m.primary, m.primary_joints):
-            q[j] = target[a]
-        sol = closure.solve_closure(m.model, q, m.free_joints, ops, m.closure_tolerance)
+        sol = closure.solve_closure(m.model, list(predicted), m.free_joints, ops,
+                                    m.closure_tolerance)
         basis = velocity_basis(m, sol)
         mismatch = 0.0
         if m.is_redundant:
@@ -446,19 +512,24 @@ class InverseDynamics:
     # --- positions: a batch ----------------------------------------------------------------
 
     def _solve_batch(self, qa, on_invalid, invalid=None):
-        """Solve N samples as one trajectory: serial anchors every ``continuation_step`` of
-        actuator travel, interpolation between them as the start of one vectorised Newton
-        solve of all samples, and a serial re-solve of any sample that did not come out right.
+        """Solve N samples as one trajectory, on the branch sample-by-sample continuation
+        reaches: serial anchors every continuation step of actuator travel, interpolation
+        between them as the start of one vectorised Newton solve of all samples, then a
+        check of every sample against its predecessor by the serial path's own rules (one
+        continuation step away, a small Newton correction of the first-order prediction),
+        and a serial re-solve, in order, of every sample that fails it.
 
         Returns (step on (N,) lanes, positions (N, n_joints), ok (N,), errors list)."""
         m = self.mechanism
         n = len(qa)
         start_state = self._state
         invalid = np.zeros(n, bool) if invalid is None else invalid
+        limits = np.array(self._limits)
         start = np.array([start_state[0][j] for j in m.active_index])
-        travel = np.max(np.abs(np.diff(np.vstack([start, qa]), axis=0)), axis=1)
+        travel = np.max(np.abs(np.diff(np.vstack([start, qa]), axis=0)) /
+                        limits[m.active_index], axis=1)
         arc = np.cumsum(travel)
-        bucket = np.floor(arc / self.continuation_step)
+        bucket = np.floor(arc)
         is_anchor = np.diff(np.concatenate([[0.0], bucket])) > 0
         is_anchor[-1] = True
         is_anchor &= ~invalid
@@ -482,38 +553,19 @@ class InverseDynamics:
             lam = np.where(span > 0, (arc - knots_arc[prv]) / span, 1.0)
         lam = np.clip(lam, 0.0, 1.0)[:, None]
         guess = knots_q[prv] + lam * (knots_q[nxt] - knots_q[prv])
-        suspect = invalid.copy()
-        for a in failed:   # samples up to a failed anchor are re-solved serially
-            lo = max([k for k in known if k < a], default=-1)
-            suspect[lo + 1:a + 1] = True
-        step = self._closure_step([guess[:, j] for j in range(len(m.joints))], None,
+        guess[:, m.primary_joints] = qa[:, m.primary]
+        step = self._closure_step([guess[:, j] for j in range(len(m.joints))],
                                   [qa[:, a] for a in range(len(m.active_joints))], sp.ArrayOps)
         positions = np.column_stack(np.broadcast_arrays(*step.sol.q, np.zeros(n))[:-1])
-        ok = (np.broadcast_to(step.sol.converged, (n,)) &
-              (step.condition <= m.max_condition_number) &
-              (np.broadcast_to(step.mismatch, (n,)) <= m.setpoint_tolerance) &
-              (np.max(np.abs(positions - guess), axis=1) <= self.batch_jump_limit) & ~suspect)
-        errors = [None] * n
         basis = np.stack([np.column_stack(np.broadcast_arrays(*row, np.zeros(n))[:-1])
                           for row in step.basis], axis=1)          # (N, n_joints, dof)
-        redone = False
-        for i in np.flatnonzero(~ok):
-            if invalid[i]:
-                continue
-            good = np.flatnonzero(ok[:i])
-            self._state = start_state if good.size == 0 else \
-                (positions[good[-1]].tolist(), basis[good[-1]].tolist())
-            try:
-                serial = self._solve_serial(qa[i].tolist(), sample=int(i))
-            except CogIdError as exc:
-                errors[i] = exc
-                if on_invalid == 'raise':
-                    self._state = start_state
-                    raise
-                continue
-            positions[i] = serial.sol.q
-            basis[i] = serial.basis
-            ok[i], redone = True, True
+        ok = (np.broadcast_to(step.sol.converged, (n,)) &
+              (step.condition <= m.max_condition_number) &
+              (np.broadcast_to(step.mismatch, (n,)) <= m.setpoint_tolerance) & ~invalid)
+        ok &= self._continues(start_state, qa, positions, basis)
+        errors = [None] * n
+        redone = self._resolve_serially(qa, positions, basis, ok, invalid, errors,
+                                        start_state, on_invalid)
         good = np.flatnonzero(ok)
         if good.size:
             last = good[-1]
@@ -527,6 +579,73 @@ class InverseDynamics:
                                    m.free_joints, sp.ArrayOps)
             step = _Step(sol, velocity_basis(m, sol), step.mismatch, sol.lsq.condition_number())
         return step, positions, ok, errors
+
+    def _continues(self, start_state, qa, positions, basis):
+        """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for
+        i = 0) and within the Newton correction bound of its first-order prediction, i.e.
+        where the serial path would have taken it in one step from there."""
+        m = self.mechanism
+        limits, bounds = np.array(self._limits), np.array(self._bounds)
+        prev_q = np.vstack([np.asarray(start_state[0], float)[None, :], positions[:-1]])
+        prev_basis = np.concatenate([np.asarray(start_state[1], float)[None], basis[:-1]])
+        dz = qa[:, m.primary] - prev_q[:, m.primary_joints]
+        moved = np.einsum('njk,nk->nj', prev_basis, dz)
+        predicted = prev_q + moved
+        predicted[:, m.primary_joints] = qa[:, m.primary]
+        near = np.abs(qa - prev_q[:, m.active_index]) <= limits[m.active_index]
+        return (near.all(axis=1) & (np.abs(moved) <= limits).all(axis=1) &
+                (np.abs(positions - predicted) <= bounds).all(axis=1))
+
+    def _resolve_serially(self, qa, positions, basis, ok, invalid, errors, start_state,
+                          on_invalid):
+        """Re-solve, in order, every sample not ``ok`` by serial continuation from the last
+        good sample before it; a sample after one that changed is checked again. Updates
+        the arrays in place; returns True if any sample was re-solved."""
+        m = self.mechanism
+        pending = [int(i) for i in np.flatnonzero(~ok)]
+        heapq.heapify(pending)
+        last_good, last_done, redone = -1, -1, False
+        while pending:
+            i = heapq.heappop(pending)
+            if i <= last_done:
+                continue
+            if last_done != i - 1:     # the samples before i were good as they were
+                last_good = i - 1
+            last_done = i
+            previous = start_state if last_good < 0 else \
+                (positions[last_good].tolist(), basis[last_good].tolist())
+            if invalid[i]:
+                if i + 1 < len(ok):
+                    heapq.heappush(pending, i + 1)
+                continue
+            if ok[i] and self._one_step(previous, qa[i], positions[i]):
+                last_good = i                  # still continues from its new predecessor
+                continue
+            self._state = previous
+            before = positions[i].copy()
+            try:
+                serial, _ = self._solve_serial(qa[i].tolist(), sample=i)
+            except CogIdError as exc:
+                errors[i], ok[i] = exc, False
+                if on_invalid == 'raise':
+                    self._state = start_state
+                    raise
+            else:
+                positions[i], basis[i] = serial.sol.q, serial.basis
+                ok[i], redone, last_good = True, True, i
+                if np.max(np.abs(positions[i] - before)) <= 1e-9:
+                    continue                    # the same pose: the samples after it stand
+            if i + 1 < len(ok):
+                heapq.heappush(pending, i + 1)
+        return redone
+
+    def _one_step(self, state, target, solution):
+        """The serial rule of _continues for one sample (lists and arrays of floats)."""
+        m = self.mechanism
+        target = target.tolist()
+        predicted, moved = prediction(m, state, target)
+        return (fits_one_step(m, self._limits, state, target, moved) and
+                correction_ok(solution.tolist(), predicted, self._bounds))
 
     # --- evaluation ---------------------------------------------------------------------------
 
@@ -562,8 +681,7 @@ class InverseDynamics:
             residual[i] = getattr(exc, 'residual', math.inf)
             condition[i] = getattr(exc, 'condition_number', math.inf)
             if exc is None:
-                errors[i] = SingularConfigurationError(
-                    f'sample {i}: torques are not finite here', math.inf, int(i))
+                errors[i] = _out_of_range(qd[i].tolist(), qdd[i].tolist(), int(i))
                 if on_invalid == 'raise':
                     raise errors[i]
         tau[~ok] = 0.0
@@ -574,10 +692,11 @@ class InverseDynamics:
         try:
             if error is not None:
                 raise error
-            step = self._solve_serial(q[0].tolist())
+            step, state = self._solve_serial(q[0].tolist())
             tau = self._torques(step, qd[0].tolist(), qdd[0].tolist(), sp.ScalarOps)
             if not all(map(math.isfinite, tau)):
-                raise SingularConfigurationError('torques are not finite here', math.inf)
+                raise _out_of_range(qd[0].tolist(), qdd[0].tolist(), None)
+            self._state = state
         except CogIdError as exc:
             if on_invalid == 'raise':
                 raise
@@ -599,13 +718,76 @@ class InverseDynamics:
         if errors:
             raise errors[min(errors)]
         if single:
-            step = self._solve_serial(q[0].tolist())
+            step, state = self._solve_serial(q[0].tolist())
             extra = (qd[0].tolist(),) if with_rates else ()
-            return tuple(np.array(x) for x in compute(step, sp.ScalarOps, *extra))
-        with np.errstate(all='ignore'):
-            step = self._solve_batch(q, 'raise')[0]
-            extra = ([qd[:, a] for a in range(qd.shape[1])],) if with_rates else ()
-            return tuple(_stack(x, len(q)) for x in compute(step, sp.ArrayOps, *extra))
+            out = tuple(np.array(x) for x in compute(step, sp.ScalarOps, *extra))
+        else:
+            start = self._state
+            with np.errstate(all='ignore'):
+                step = self._solve_batch(q, 'raise')[0]
+                extra = ([qd[:, a] for a in range(qd.shape[1])],) if with_rates else ()
+                out = tuple(_stack(x, len(q)) for x in compute(step, sp.ArrayOps, *extra))
+            state, self._state = self._state, start
+        for x in out:
+            if not np.isfinite(x).all():
+                bad = int(np.flatnonzero(~np.isfinite(x).reshape(len(q), -1).all(axis=1))[0])
+                raise _out_of_range(qd[bad].tolist(), [0.0] * qd.shape[1],
+                                    None if single else bad)
+        self._state = state
+        return out
+
+
+def _float_array(label, value, m):
+    """``value`` as a float array; a plain number is one sample when m == 1. SetpointError
+    (reason 'malformed') for strings, mappings, booleans, ragged or non-numeric input."""
+    if isinstance(value, (str, bytes, dict)) or (
+            not isinstance(value, np.ndarray) and not hasattr(value, '__len__') and
+            not isinstance(value, (int, float, np.number))):
+        raise SetpointError(f'{label}: must be numbers (one per active joint), got '
+                            f'{type(value).__name__}')
+    try:
+        raw = np.asarray(value)
+        if raw.dtype.kind not in 'iufO':
+            raise TypeError(f'{raw.dtype} values')
+        array = raw.astype(float)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise SetpointError(f'{label}: must be numbers (one per active joint), not {exc}') from None
+    if array.ndim == 0:
+        if m != 1:
+            raise SetpointError(f'{label}: a single number is a setpoint for one active joint; '
+                                f'this mechanism has {m}: give one number per active joint')
+        array = array.reshape(1)
+    return array
+
+
+class _HandOver(Exception):
+    """The straight-line code cannot serve a step: the general path decides."""
+
+
+def _fmt(values):
+    return '[' + ', '.join(f'{v:.6g}' for v in values) + ']'
+
+
+def _unreachable(mechanism, start, target, sample, why):
+    """ClosureError(reason='unreachable') for a setpoint continuation cannot get to."""
+    where = '' if sample is None else f'sample {sample}: '
+    q = start[0]
+    last = [q[j] for j in mechanism.active_index]
+    return ClosureError(
+        f'{where}cannot reach the setpoint {_fmt(target)} from the last pose {_fmt(last)} '
+        f'of {mechanism.active_joints}: {why}. Send setpoints closer together (the solver '
+        f'follows the assembly branch in short steps), or reset() to start over from '
+        f'initial_positions', math.inf, sample, reason='unreachable')
+
+
+def _out_of_range(qd, qdd, sample):
+    """SetpointError(reason='out_of_range') for finite input whose torques overflow."""
+    where = '' if sample is None else f'sample {sample}: '
+    largest = max([abs(x) for x in list(qd) + list(qdd)] or [0.0])
+    return SetpointError(
+        f'{where}the torques are not finite at this setpoint: the velocities or '
+        f'accelerations (largest magnitude {largest:.3g}) are too large to compute with',
+        sample=sample, reason='out_of_range')
 
 
 def _sample_program(solver):

@@ -66,20 +66,12 @@ class SampleProgram:
                            for k, j in enumerate(m.primary_joints)}
         self.step = _compile_step(self)
 
-    def torques(self, state, target, qd, qdd):
-        """(torques, new state) for one sample from ``state`` = (q, basis), at most one
-        continuation step away; None when the general
+    def solve(self, predicted, qd, qdd):
+        """(torques, new state (q, basis)) at the closed pose nearest ``predicted`` (the
+        continuation's prediction, primary actuators at their goal); None when the general
         path must decide (slow convergence, a singular or unclosable pose)."""
         m = self.mechanism
-        q, basis = state
-        dz = [target[a] - q[j] for a, j in zip(m.primary, m.primary_joints)]
-        if len(dz) == 1:     # the same sums as the general path, without a generator each
-            d = dz[0]
-            q = [x + row[0] * d for x, row in zip(q, basis)]
-        else:
-            q = [x + sum(b * d for b, d in zip(row, dz)) for x, row in zip(q, basis)]
-        for a, j in zip(m.primary, m.primary_joints):
-            q[j] = target[a]
+        q = list(predicted)
         tol, nr, nl, nc = m.closure_tolerance, self.n_residual, self.n_loops, self.n_closure
         free = m.free_joints
         evaluate = self.newton       # closure only, until the configuration is closed
@@ -93,7 +85,7 @@ class SampleProgram:
                 continue
             step = out[nr + nl:nc]
             size = max(map(abs, step))
-            if not size < math.inf or size < 1e-15 * (1.0 + max(map(abs, q))):
+            if not size < math.inf or size < 1e-15 * (1.0 + max([abs(q[j]) for j in free])):
                 return None
             factor = min(1.0, self.max_step / size)
             for k, j in enumerate(free):
@@ -117,14 +109,16 @@ class SampleProgram:
 
 
 def _compile_step(program):
-    """``step(state, target, qd, qdd, continuation_step)`` -> (torques, new state) or None.
+    """``step(state, target, qd, qdd, limits, bounds)`` -> (torques, new state) or None.
 
-    The glue of :meth:`SampleProgram.torques` (and the continuation check of the solver)
-    written out for this mechanism's sizes, for the case that covers nearly every sample
-    at control rate: ``target`` within one continuation step, and closed after at most
-    ``UNROLLED_NEWTON_STEPS`` Newton steps. Every expression is the one the loops evaluate,
-    in the same order, so the result is the same to the last bit; any other case returns
-    None before anything is changed, and the loops take over.
+    The glue of :meth:`SampleProgram.solve` and the continuation rules of the solver
+    (continuation.py) written out for this mechanism's sizes, for the case that covers
+    nearly every sample at control rate: ``target`` within one continuation step (no
+    actuator and no predicted joint motion beyond its limit in ``limits``), closed after
+    at most ``UNROLLED_NEWTON_STEPS`` Newton steps, with a Newton correction within
+    ``bounds`` (CORRECTOR_RATIO times the limits). Every expression is the one the loops
+    evaluate, in the same order, so the result is the same to the last bit; any other case
+    returns None before anything is changed, and the loops take over.
     """
     m = program.mechanism
     n = len(m.joints)
@@ -134,22 +128,27 @@ def _compile_step(program):
         return None
     qs = [f'q{i}' for i in range(n)]
     vector = '[' + ', '.join(qs) + ']'
-    lines = ['def step(state, target, qd, qdd, continuation_step):',
+    lines = ['def step(state, target, qd, qdd, limits, bounds):',
              f'    ({", ".join(qs)},), basis = state' if n == 1 else
              f'    ({", ".join(qs)}), basis = state']
-    # the continuation goals: one goal (target itself) when the distance needs one step
-    gaps = [f'abs(target[{a}] - q{j})' for a, j in enumerate(m.active_index)]
-    distance = gaps[0] if len(gaps) == 1 else f'max({", ".join(gaps)})'
-    lines += [f'    if not {distance} / continuation_step - 1e-9 <= 1.0:',
+    # one continuation step: no actuator moves by more than its step limit ...
+    gaps = [f'abs(target[{a}] - q{j}) <= limits[{j}]' for a, j in enumerate(m.active_index)]
+    lines += [f'    if not ({" and ".join(gaps)}):',
               '        return None']
-    # the predictor: q + basis (target - q) on the primary actuators, then the targets
+    # ... the predictor q + basis (target - q) on the primary actuators, then the targets ...
     lines += [f'    d{k} = target[{a}] - q{j}'
               for k, (a, j) in enumerate(zip(m.primary, m.primary_joints))]
     for i in range(n):
         terms = [f'basis[{i}][{k}] * d{k}' for k in range(len(m.primary))]
         moved = terms[0] if len(terms) == 1 else '(0 + ' + ' + '.join(terms) + ')'
-        lines.append(f'    q{i} = q{i} + {moved}')
+        lines.append(f'    m{i} = {moved}')
+    # ... and no joint is predicted to move by more than its limit
+    lines += [f'    if not ({" and ".join(f"abs(m{i}) <= limits[{i}]" for i in range(n))}):',
+              '        return None']
+    lines += [f'    q{i} = q{i} + m{i}' for i in range(n)]
     lines += [f'    q{j} = target[{a}]' for a, j in zip(m.primary, m.primary_joints)]
+    free = m.free_joints
+    lines += [f'    p{j} = q{j}' for j in free]
 
     def closed(out):
         residual = (f'abs({out}[0])' if nr == 1 else
@@ -161,10 +160,10 @@ def _compile_step(program):
             test += f' and {cosine} > 0.0'
         return test
 
-    free = m.free_joints
     size = ('abs(o[{}])'.format(nr + nl) if len(free) == 1 else
             'max(' + ', '.join(f'abs(o[{nr + nl + k}])' for k in range(len(free))) + ')')
-    largest = 'abs(q0)' if n == 1 else 'max(' + ', '.join(f'abs({x})' for x in qs) + ')'
+    largest = (f'abs(q{free[0]})' if len(free) == 1 else
+               'max(' + ', '.join(f'abs(q{j})' for j in free) + ')')
     lines += [f'    o = newton({vector}, qd, qdd)',
               f'    if {closed("o")}:',
               f'        o = full({vector}, qd, qdd)',
@@ -182,6 +181,11 @@ def _compile_step(program):
               '                break',
               '        else:',
               '            return None']
+    # the Newton correction stayed small: the step stayed on its branch
+    if free:
+        kept = ' and '.join(f'abs(q{j} - p{j}) <= bounds[{j}]' for j in free)
+        lines += [f'    if not ({kept}):',
+                  '        return None']
     tau = [f'o[{nc + 1 + a}]' for a in range(n_act)]
     finite = ' and '.join(f'isfinite({t})' for t in tau)
     lines += [f'    if not (o[{nc}] <= {m.max_condition_number!r} and {finite}):',
