@@ -30,6 +30,7 @@ import csv
 import math
 import os
 import re
+import stat
 import tempfile
 
 import numpy as np
@@ -39,6 +40,17 @@ from . import derivatives
 TIME = 'time'
 FIELDS = ('position', 'velocity', 'acceleration')
 EFFORT = 'effort'
+
+#: time steps (s) between which velocities and accelerations are estimated: outside this
+#: range no sampled trajectory is plausible, and inside it 1/h^2 <= 1e18 keeps the
+#: estimates of any position below 1e290 finite
+MIN_ESTIMATE_STEP = 1e-9
+MAX_ESTIMATE_STEP = 1e9
+
+#: at most this many characters of a cell are quoted in a message (a 50 MB cell is not)
+_MAX_QUOTED = 40
+#: at most this many ignored column names are listed in a note
+_MAX_LISTED_COLUMNS = 10
 
 
 class TrajectoryError(ValueError):
@@ -98,9 +110,18 @@ def _split_lines(text):
     return lines
 
 
+_UTF16_BOMS = (b'\xff\xfe', b'\xfe\xff')
+
+
 def _read_text(path):
     with open(path, 'rb') as f:
         data = f.read()
+    if data[:2] in _UTF16_BOMS or data[:4] in (b'\xff\xfe\x00\x00', b'\x00\x00\xfe\xff'):
+        raise TrajectoryError(path, 'the file is UTF-16 or UTF-32 text (it starts with that '
+                              'byte-order mark); save it as UTF-8', header=True)
+    if b'\x00' in data[:4096]:
+        raise TrajectoryError(path, 'binary data (a NUL byte near the start), not a CSV text '
+                              'file', header=True)
     try:
         text = data.decode('utf-8-sig')
     except UnicodeDecodeError as e:
@@ -155,12 +176,26 @@ def _classify_header(path, names, joints, active_joints):
                 header=True, column=col)
     notes = []
     if ignored_inactive:
-        notes.append('ignoring ' + ', '.join(ignored_inactive)
+        notes.append('ignoring ' + _name_list(ignored_inactive)
                      + ': not an active joint (active: ' + ', '.join(active) + ')')
     if ignored_other:
-        notes.append('ignoring column(s) ' + ', '.join(ignored_other)
+        notes.append('ignoring column(s) ' + _name_list(ignored_other)
                      + ': not time or <joint>.position|velocity|acceleration')
     return used, notes
+
+
+def _name_list(names):
+    """At most _MAX_LISTED_COLUMNS names (a file may have a million columns)."""
+    names = [_quoted(n, quote=False) for n in names[:_MAX_LISTED_COLUMNS]] + (
+        [f'... ({len(names) - _MAX_LISTED_COLUMNS:,} more)']
+        if len(names) > _MAX_LISTED_COLUMNS else [])
+    return ', '.join(names)
+
+
+def _quoted(text, quote=True):
+    """A cell for a message: repr-quoted, cut to _MAX_QUOTED characters."""
+    short = text if len(text) <= _MAX_QUOTED else text[:_MAX_QUOTED] + f'... ({len(text):,} characters)'
+    return repr(short) if quote else short
 
 
 def _cells(line):
@@ -194,12 +229,21 @@ def _parse_cell(text):
 def _bad_cell(path, row, name, cell):
     if not cell.strip():
         return TrajectoryError(path, 'empty cell, expected a number', row=row, column=name)
-    return TrajectoryError(path, f'{cell.strip()!r} is not a number', row=row, column=name)
+    return TrajectoryError(path, f'{_quoted(cell.strip())} is not a number', row=row, column=name)
 
 
-def _non_finite(path, row, name, value):
-    what = 'NaN' if math.isnan(value) else 'an infinite value'
-    return TrajectoryError(path, f'{what} is not allowed here', row=row, column=name)
+_INF_WORDS = ('inf', '+inf', '-inf', 'infinity', '+infinity', '-infinity')
+
+
+def _non_finite(path, row, name, value, cell=None):
+    if math.isnan(value):
+        what = 'NaN is not allowed here'
+    elif cell is not None and cell.strip().strip('"').strip().lower() not in _INF_WORDS:
+        what = (f'{_quoted(cell.strip())} is beyond the range of a double '
+                '(|x| <= 1.8e308); such a value cannot be computed with')
+    else:
+        what = 'an infinite value is not allowed here'
+    return TrajectoryError(path, what, row=row, column=name)
 
 
 def _parse_rows(path, lines, n_columns, order):
@@ -215,7 +259,7 @@ def _parse_rows(path, lines, n_columns, order):
             except ValueError:
                 raise _bad_cell(path, k, name, cells[i]) from None
             if not math.isfinite(value):
-                raise _non_finite(path, k, name, value)
+                raise _non_finite(path, k, name, value, cells[i])
     return data
 
 
@@ -258,8 +302,9 @@ def read_trajectory(path, joints, active_joints):
             _locate_bad_cell(path, lines, len(names), order, str(e))
     finite = np.isfinite(data)
     if not finite.all():
-        bad_row, bad_col = np.argwhere(~finite)[0]
-        raise _non_finite(path, int(bad_row) + 1, order[bad_col][0], float(data[bad_row, bad_col]))
+        bad_row, bad_col = (int(i) for i in np.argwhere(~finite)[0])
+        cell = _cells(lines[bad_row + 1])[order[bad_col][1]]
+        raise _non_finite(path, bad_row + 1, order[bad_col][0], float(data[bad_row, bad_col]), cell)
     columns = {name: np.ascontiguousarray(data[:, j]) for j, (name, _) in enumerate(order)}
     time = columns.pop(TIME)
     steps = np.diff(time)
@@ -271,46 +316,202 @@ def read_trajectory(path, joints, active_joints):
     return Trajectory(path, time, columns, notes, names)
 
 
-def setpoints(traj, active_joints):
+def unwrap_positions(traj, joints):
+    """Unwrap the position columns of ``joints`` (revolute ones) in place.
+
+    Each position is replaced by its 2 pi equivalent nearest the previous row's (already
+    unwrapped) position, as an encoder of a continuous joint that reports angles in
+    (-pi, pi] needs. A step too large for that to mean anything (2^50 or more) is left as
+    it is (the jump check reports it). Returns ``{column: (rows shifted, wraps)}``: how
+    many rows now differ from the file and at how many rows a wrap was undone.
+    """
+    result = {}
+    for joint in joints:
+        name = joint_column(joint, 'position')
+        q = traj.columns[name]
+        with np.errstate(all='ignore'):
+            d = np.diff(q)
+            turns = np.round(d / (2.0 * math.pi))
+            turns[~(np.abs(d) < 2.0 ** 50)] = 0.0
+            total = np.cumsum(turns)
+            shifted = np.flatnonzero(total != 0.0) + 1
+            if shifted.size:
+                q = q.copy()
+                q[shifted] = q[shifted] - (2.0 * math.pi) * total[shifted - 1]
+                traj.columns[name] = q
+        result[name] = (int(shifted.size), int(np.count_nonzero(turns)))
+    return result
+
+
+def find_jumps(q, limits, block=4096):
+    """Rows whose position jumps from the last accepted row by more than ``limits``.
+
+    ``q`` (N, M) positions, ``limits`` (M,) the largest step per row of each column.
+    A row is compared with the last row that was not itself a jump, so one wild row is
+    one jump (not two) and everything after an unwrapped 2 pi step is one. Returns
+    ``[(row, k, step, ref_row)]``, rows 1-based: column ``k`` of ``row`` is
+    ``step`` away from ``ref_row`` (the column with the largest step relative to its limit).
+    """
+    q = np.asarray(q, dtype=float)
+    limits = np.asarray(limits, dtype=float)
+    n = q.shape[0]
+    jumps = []
+    if n < 2:
+        return jumps
+    with np.errstate(all='ignore'):
+        flagged = np.flatnonzero(~np.all(np.abs(np.diff(q, axis=0)) <= limits, axis=1))
+        i = 1                     # next row to check; its predecessor is accepted
+        while i < n:
+            at = np.searchsorted(flagged, i - 1)
+            if at == flagged.size:
+                break
+            ref = int(flagged[at])  # accepted; row ref + 1 jumps from it
+            j = ref + 1
+            accepted = None
+            while j < n and accepted is None:
+                part = np.abs(q[j:j + block] - q[ref])
+                ok = np.all(part <= limits, axis=1)
+                stop = j + int(np.argmax(ok)) if ok.any() else min(j + block, n)
+                ratio = part[:stop - j] / limits
+                ratio[np.isnan(ratio)] = np.inf
+                for r, k in zip(range(j, stop), np.argmax(ratio, axis=1).tolist()):
+                    jumps.append((r + 1, k, float(q[r, k] - q[ref, k]), ref + 1))
+                if ok.any():
+                    accepted = stop
+                j = stop
+            if accepted is None:
+                break
+            i = accepted + 1
+    return jumps
+
+
+def setpoints(traj, active_joints, keep=None):
     """Positions, velocities and accelerations (N, M) of the active joints.
 
     Absent velocity and acceleration columns are estimated with
     :mod:`cog_id_ros.derivatives`: a velocity from the positions; an acceleration from
-    the velocity column when the file has one, else from the positions. Returns
+    the velocity column when the file has one, else from the positions. ``keep`` (N,)
+    bool, optional: only these rows are used for (and get) estimates; the others (rows
+    skipped before solving) get velocity and acceleration 0. Returns
     ``(q, qd, qdd, estimated)`` where ``estimated`` lists the estimated column names.
+
+    Raises :class:`TrajectoryError` when an estimate cannot be made: fewer than
+    ``derivatives.STENCIL`` rows, a time step outside
+    [``MIN_ESTIMATE_STEP``, ``MAX_ESTIMATE_STEP``] (column ``time``, the row after the
+    step), or an estimate beyond the range of a double (the position column).
     """
     n = len(traj)
     m = len(active_joints)
+    rows = np.arange(n) if keep is None else np.flatnonzero(keep)
     q = np.empty((n, m))
-    qd = np.empty((n, m))
-    qdd = np.empty((n, m))
+    qd = np.zeros((n, m))
+    qdd = np.zeros((n, m))
     estimated = []
+    time = traj.time[rows]
+    need = [joint_column(j, f) for j in active_joints for f in ('velocity', 'acceleration')
+            if joint_column(j, f) not in traj.columns]
+    if need and rows.size < derivatives.STENCIL:
+        skipped = '' if rows.size == n else f' ({n - rows.size:,} skipped)'
+        raise TrajectoryError(
+            traj.path,
+            f'absent, and estimating it needs at least {derivatives.STENCIL} rows '
+            f'(the file has {rows.size}{skipped}); add the column', column=need[0])
+    if need:
+        _check_steps(traj.path, time, rows, need[0])
     for k, joint in enumerate(active_joints):
         pos = traj.columns[joint_column(joint, 'position')]
         vel = traj.columns.get(joint_column(joint, 'velocity'))
         acc = traj.columns.get(joint_column(joint, 'acceleration'))
         q[:, k] = pos
-        for name, present in (('velocity', vel), ('acceleration', acc)):
-            if present is None and n < derivatives.STENCIL:
-                col = joint_column(joint, name)
-                raise TrajectoryError(
-                    traj.path,
-                    f'absent, and estimating it needs at least {derivatives.STENCIL} rows '
-                    f'(the file has {n}); add the column', column=col)
         if vel is None:
-            qd[:, k] = derivatives.first_derivative(traj.time, pos)
+            qd[rows, k] = _estimate(traj.path, time, pos[rows], 1, rows, joint, 'velocity')
             estimated.append(joint_column(joint, 'velocity'))
         else:
             qd[:, k] = vel
         if acc is None:
             if vel is None:
-                qdd[:, k] = derivatives.second_derivative(traj.time, pos)
+                qdd[rows, k] = _estimate(traj.path, time, pos[rows], 2, rows, joint, 'acceleration')
             else:
-                qdd[:, k] = derivatives.first_derivative(traj.time, vel)
+                qdd[rows, k] = _estimate(traj.path, time, vel[rows], 1, rows, joint,
+                                         'acceleration', source='velocity')
             estimated.append(joint_column(joint, 'acceleration'))
         else:
             qdd[:, k] = acc
     return q, qd, qdd, estimated
+
+
+def _check_steps(path, time, rows, column):
+    steps = np.diff(time)
+    bad = np.flatnonzero(~((steps >= MIN_ESTIMATE_STEP) & (steps <= MAX_ESTIMATE_STEP)))
+    if bad.size:
+        k = int(bad[0]) + 1
+        h = float(steps[k - 1])
+        what = 'small' if h < MIN_ESTIMATE_STEP else 'large'
+        raise TrajectoryError(
+            path, f'the time step to this row, {h:.3g} s (from row {int(rows[k - 1]) + 1}), is too '
+            f'{what} to estimate {column} and the other absent derivatives: estimates need '
+            f'steps of {MIN_ESTIMATE_STEP:g} .. {MAX_ESTIMATE_STEP:g} s (rescale the time '
+            'column, or give the velocity and acceleration columns)',
+            row=int(rows[k]) + 1, column=TIME)
+
+
+def _estimate(path, time, values, order, rows, joint, field, source='position'):
+    result = derivatives.derivative(time, values, order)
+    finite = np.isfinite(result)
+    if not finite.all():
+        k = int(np.argmin(finite))
+        col = joint_column(joint, source)
+        raise TrajectoryError(
+            path, f'the estimated {joint_column(joint, field)} here is beyond the range of a '
+            f'double: the {source}s change too much for the time steps; give the '
+            f'{joint_column(joint, field)} column', row=int(rows[k]) + 1, column=col)
+    return result
+
+
+class OutputPathError(ValueError):
+    """An output path that must not be written (a FIFO, a device, ...): the message says why."""
+
+
+_SPECIAL = ((stat.S_ISFIFO, 'a FIFO (named pipe)'), (stat.S_ISCHR, 'a character device'),
+            (stat.S_ISBLK, 'a block device'), (stat.S_ISSOCK, 'a socket'))
+
+
+def output_target(path):
+    """The file that writing ``path`` really replaces: ``path``, or the end of its symlinks.
+
+    A symbolic link is written through: the file it points to is replaced (atomically)
+    and the link stays; a dangling link creates its target. Raises
+    :class:`OutputPathError` for a directory, a FIFO, a device or a socket (these are
+    never replaced by a regular file, nor written into) and for a link that cannot be
+    resolved (a loop).
+    """
+    path = os.fspath(path)
+    target = path
+    if os.path.islink(path):
+        try:
+            target = os.path.realpath(path, strict=True)
+        except FileNotFoundError:
+            target = os.path.realpath(path)
+        except OSError as exc:
+            raise OutputPathError(f'a symbolic link that cannot be resolved '
+                                  f'({exc.strerror or exc})') from None
+        if os.path.islink(target):
+            raise OutputPathError('a symbolic link that cannot be resolved (a loop)')
+    try:
+        mode = os.stat(target).st_mode
+    except FileNotFoundError:
+        return target
+    except OSError as exc:
+        raise OutputPathError(f'cannot be examined ({exc.strerror or exc})') from None
+    if stat.S_ISREG(mode):
+        return target
+    if stat.S_ISDIR(mode):
+        raise OutputPathError('is a directory' + ('' if target == path else f' ({target})'))
+    kind = next((text for test, text in _SPECIAL if test(mode)), 'a special file')
+    via = '' if target == path else f' (the link points to {target})'
+    raise OutputPathError(
+        f'is {kind}{via}, not a regular file; outputs are written to a temporary file and '
+        'renamed, which would replace it, so it is left alone: write to a regular file')
 
 
 def _umask():
@@ -321,22 +522,30 @@ def _umask():
 
 @contextlib.contextmanager
 def atomic_output(path):
-    """Yield a temporary path next to ``path``; rename it to ``path`` on success only.
+    """Yield a temporary path next to ``path``'s target; rename it there on success only.
 
-    On an exception the temporary file is removed and ``path`` is left as it was.
+    The target is :func:`output_target` (``path``, or the file its symlinks lead to;
+    special files raise :class:`OutputPathError` before anything is created, and are
+    checked again just before the rename). On an exception (including
+    ``KeyboardInterrupt`` and other ``BaseException``) the temporary file is removed and
+    the target is left as it was.
     """
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix='.' + os.path.basename(path) + '.',
-                               suffix='.tmp')
-    os.close(fd)
+    target = output_target(path)
+    directory = os.path.dirname(os.path.abspath(target))
+    tmp = None
     try:
+        fd, tmp = tempfile.mkstemp(dir=directory, prefix='.' + os.path.basename(target) + '.',
+                                   suffix='.tmp')
+        os.close(fd)
         yield tmp
         os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
+        if output_target(path) != target:
+            raise OutputPathError(f'{path} changed while it was being written')
+        os.replace(tmp, target)
     except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
         raise
 
 

@@ -241,8 +241,9 @@ def _case_files(tmp_path, case):
         q = np.linspace(0.8, 1.5, 15)             # closes up to 1.287 rad: rows 1..10
         write_csv(src, {'time': np.arange(15) * 0.1, 'joint1.position': q,
                         'joint1.velocity': np.zeros(15), 'joint1.acceleration': np.zeros(15)})
-        return params, src, 11, ("row 11 (line 12 of the file), column(s) 'joint1.position': "
-                                 'the loops cannot be closed')
+        # the wording is the core's ('the loops cannot be closed', or 'cannot reach the
+        # setpoint' when the continuation stops): the row and the column are the tool's
+        return params, src, 11, "row 11 (line 12 of the file), column(s) 'joint1.position': "
     if case == 'singular pose':
         q = np.array([1.5, 1.0, 0.5, 0.0, 0.5])    # the parallelogram folds flat at 0 rad
         write_csv(src, {'time': np.arange(5) * 0.1, 'joint3.position': q,
@@ -286,9 +287,13 @@ def test_skip_invalid_reports_the_rows_and_leaves_their_cells_empty(tmp_path):
     assert proc.returncode == 0, proc.stderr
     s = json.loads(proc.stdout)
     assert s['skipped_rows'] == [11, 12, 13, 14, 15] and s['solved'] == 10
-    assert set(s['skipped_reasons']) == {'ClosureError'}
+    # keyed by the core's machine-readable reason; the exception types are kept apart
+    assert set(s['skipped_reasons']) <= {'closure', 'unreachable'}
+    assert sum(s['skipped_reasons'].values()) == 5
+    assert s['skipped_error_types'] == {'ClosureError': 5}
+    assert set(s['skipped_row_reasons']) == set(s['skipped_reasons'])
     for row in s['skipped_rows']:
-        assert f'row {row} (line {row + 1} of the file): the loops cannot be closed' in proc.stderr
+        assert f'row {row} (line {row + 1} of the file): ' in proc.stderr
     lines = (tmp_path / 'tau.csv').read_text().splitlines()
     assert all(line.endswith(',') for line in lines[11:]) and len(lines) == 16
     _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
