@@ -31,26 +31,35 @@ read once at start-up and are read-only afterwards. A parameter that cannot be h
 ends the process with exit status 2 and one line naming the parameter.
 
 Threads: ``joint_setpoint`` is served by a thread of its own (:mod:`cog_id_ros.setpoint_loop`),
-everything else by the executor in the main thread; shared state is under ``self.lock``.
+trajectories by a thread and a process of their own (:class:`TrajectoryWorker`), everything
+else by the executor in the main thread; shared state is under ``self.lock``. No exception
+in a callback ends the node: it is counted (``internal_errors``) and logged with its type.
 
 The physics is in :mod:`cog_id_ros.core`, the acceleration estimator in
 :mod:`cog_id_ros.setpoint_filter`, the message checks in :mod:`cog_id_ros.ros_conversions`.
 """
 import collections
+import functools
 import gc
 import math
+import multiprocessing
+import os
+import re
 import sys
+import tempfile
 import threading
 import time
 
 import numpy as np
 import rclpy
 import rclpy.exceptions
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
@@ -59,13 +68,33 @@ from trajectory_msgs.msg import JointTrajectory
 
 from . import stop_signals
 from .core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
-from .ros_conversions import (REASONS, EffortMessages, JointSelector, Rejected,
-                              effort_trajectory, rejection, setpoint_arrays, stamp_to_ns,
-                              trajectory_arrays)
+from .ros_conversions import (NANOSECONDS, REASONS, TRAJECTORY_REASONS, EffortMessages,
+                              JointSelector, Rejected, nearest_turn, rejection, setpoint_arrays,
+                              stamp_to_ns, trajectory_point_count, trajectory_process)
 from .setpoint_filter import SetpointFilter, StampError
 from .setpoint_loop import SetpointLoop
 
 NODE_NAME = 'cog_id_node'
+
+USAGE = f"""usage: {NODE_NAME} [-h] --ros-args --params-file FILE [-p NAME:=VALUE ...] [-r OLD:=NEW ...]
+
+Closed-link inverse dynamics as a ROS 2 node: JointState setpoints in on joint_setpoint,
+actuator efforts out on effort_command and joint_effort (one per accepted setpoint);
+whole trajectories in on joint_trajectory, out on effort_trajectory; counts and health
+on /diagnostics.
+
+The mechanism (mechanism.*, links.*, joints.*) and the node's own parameters come from a
+ROS 2 parameter file, e.g.
+
+    {NODE_NAME} --ros-args --params-file config/paper_four_bar_a.yaml
+    {NODE_NAME} --ros-args --params-file config/paper_four_bar_b.yaml -r __ns:=/arm
+
+A parameter that cannot be honoured ends the node with exit status 2 and one line naming
+it. Ctrl-C or SIGTERM stop it (exit status 0).
+
+Documentation: docs/node.md (topics, parameters, diagnostics) and README.md (the
+mechanism parameter file) of the cog_id_ros package.
+"""
 
 #: keep-last depth of the control topics: 100 setpoints are 50-100 ms of a 2-1 kHz stream.
 #: Deep enough that a Python pause (garbage collection, a busy core) or a burst from the
@@ -74,6 +103,13 @@ NODE_NAME = 'cog_id_node'
 #: setpoints instead of queueing them for seconds. Keep-last, not keep-all: a slow reader
 #: never blocks the publisher. Override per topic (depth 1: only the newest setpoint).
 CONTROL_QOS_DEPTH = 100
+
+#: QoS overrides the node honours: the policies and their values (depth: MAX_QOS_DEPTH)
+QOS_OVERRIDE_VALUES = {
+    'history': ('keep_last', 'keep_all', 'system_default'),
+    'reliability': ('reliable', 'best_effort', 'system_default'),
+}
+MAX_QOS_DEPTH = 10_000
 
 
 def control_qos():
@@ -87,70 +123,174 @@ MECHANISM_PREFIXES = ('mechanism.', 'links.', 'joints.')
 
 TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
 
-#: the node's own parameters: name -> (default, description). ``None`` as the default of
-#: effort_limits means "one .inf per active joint" (no limit).
+#: max_setpoint_step per joint type when the parameter is not given (rad, m)
+DEFAULT_MAX_STEP = {'revolute': 1.0, 'prismatic': 0.1}
+
+#: the node's own parameters: name -> (type, default, description). ``None`` as the default
+#: of effort_limits means "one .inf per active joint" (no limit), of max_setpoint_step "the
+#: default of each active joint's type" (DEFAULT_MAX_STEP).
 NODE_PARAMETERS = {
-    'effort_limits': (None, 'per active joint (or one for all), N or N m, > 0: efforts are '
-                            'clipped to +-limit and clipping is counted in diagnostics; .inf: '
-                            'no limit (default)'),
-    'setpoint_timeout': (0.5, 's without a setpoint after which the stream counts as stopped '
-                              '(timeout_behavior applies, the estimator restarts, the next '
-                              'setpoint may have any stamp); 0: never (stamps must then '
-                              'increase for the whole life of the node)'),
-    'timeout_behavior': ('hold', 'what is published on effort_command when the stream stops: '
-                                 "'hold' the gravity-holding efforts of the last valid pose, "
-                                 "'zero' zeros, 'none' nothing (once per stop)"),
-    'max_setpoint_interval': (0.1, 's: setpoints farther apart (by stamp) are not differentiated '
-                                   'across the gap; the acceleration estimator restarts'),
-    'estimator_window': (4, 'setpoints in the local polynomial of the acceleration estimator '
-                            '(3..8; 3: least noise, 4: no lag to O(h^2))'),
-    'diagnostics_period': (1.0, 's between /diagnostics messages'),
-    'warning_period': (1.0, 's: each kind of rejected setpoint is logged at most once a period'),
+    'effort_limits': ('double[]', None,
+                      'per active joint (or one for all), N or N m, > 0: efforts are clipped to '
+                      '+-limit and clipping is counted in diagnostics; .inf: no limit (default)'),
+    'setpoint_timeout': ('double', 0.5,
+                         's without a setpoint after which the stream counts as stopped '
+                         '(timeout_behavior applies, the estimator restarts, the next setpoint '
+                         'may have any stamp); 0: never (stamps must then increase for the '
+                         'whole life of the node); else 0.005 to 3600'),
+    'timeout_behavior': ('string', 'hold',
+                         'what is published on effort_command when the stream stops: '
+                         "'hold' the gravity-holding efforts of the last valid pose, "
+                         "'zero' zeros, 'none' nothing (once per stop)"),
+    'max_setpoint_interval': ('double', 0.1,
+                              's (0.0001 to 3600): setpoints farther apart (by stamp) are not '
+                              'differentiated across the gap; the estimator restarts'),
+    'estimator_window': ('int', 4,
+                         'setpoints in the local polynomial of the acceleration estimator '
+                         '(3..8; 3: least noise, 4: no lag to O(h^2))'),
+    'unwrap_angles': ('bool', True,
+                      'revolute active joints: a setpoint is taken as the 2 pi equivalent '
+                      'nearest the previous accepted one of its stream, so an encoder that '
+                      'wraps from +pi to -pi is not a jump (joint_effort carries the positions '
+                      'as received); false: positions are used as received'),
+    'max_setpoint_step': ('double[]', None,
+                          'per active joint (or one for all), rad or m, > 0: a setpoint that '
+                          'moves an active joint farther than this from the previous accepted '
+                          'one of its stream (after unwrapping) is rejected (jump) and the '
+                          f'estimator restarts; default {DEFAULT_MAX_STEP["revolute"]:g} rad for '
+                          f'revolute, {DEFAULT_MAX_STEP["prismatic"]:g} m for prismatic joints; '
+                          '.inf: no check'),
+    'max_stamp_lead': ('double', 1.0,
+                       's, >= 0: a setpoint stamped farther than this ahead of the node\'s clock '
+                       'is rejected (stamp); .inf: no check'),
+    'max_stamp_rejections': ('int', 5,
+                             'after this many consecutive setpoints rejected because their stamp '
+                             'does not come after the previous accepted one, the estimator '
+                             'restarts and that setpoint starts a new stream (0: never; 0..1000)'),
+    'max_trajectory_points': ('int', 100_000,
+                              'a joint_trajectory with more points is rejected (too_long); '
+                              '1..10000000'),
+    'diagnostics_period': ('double', 1.0, 's between /diagnostics messages (0.05 to 3600)'),
+    'warning_period': ('double', 1.0,
+                       's (0.001 to 3600): each kind of rejected setpoint is logged at most '
+                       'once a period'),
+}
+
+#: (min, max) of the numeric node parameters (periods in s); setpoint_timeout may also be 0
+PARAMETER_BOUNDS = {
+    'setpoint_timeout': (0.005, 3600.0),
+    'max_setpoint_interval': (1e-4, 3600.0),
+    'diagnostics_period': (0.05, 3600.0),
+    'warning_period': (1e-3, 3600.0),
+    'max_stamp_lead': (0.0, math.inf),
+    'estimator_window': (3, 8),
+    'max_stamp_rejections': (0, 1000),
+    'max_trajectory_points': (1, 10_000_000),
+}
+
+#: keys of /diagnostics besides rejected.<reason> and trajectories_rejected.<reason>
+DIAGNOSTIC_KEYS = {
+    'mechanism': 'the mechanism name',
+    'active_joints': 'the active joints, in effort order',
+    'setpoints_accepted': 'setpoints served since start',
+    'setpoints_rejected': 'setpoints rejected since start (sum of rejected.<kind>)',
+    'setpoints_lost': 'setpoints the single publisher of joint_setpoint sent that never reached '
+                      'the node (gaps in its sequence numbers, e.g. a full subscription queue)',
+    'stamp_restarts': 'times the estimator restarted after max_stamp_rejections stamp rejections',
+    'trajectories_accepted': 'trajectories answered since start',
+    'trajectories_rejected': 'trajectories refused since start (sum of '
+                             'trajectories_rejected.<kind>)',
+    'trajectory_in_progress': 'true while a trajectory is being solved',
+    'effort_clipped': 'setpoints, trajectories and hold commands that were clipped',
+    'timeouts': 'times the stream stopped',
+    'internal_errors': 'exceptions the node caught in its own callbacks (a bug: please report)',
+    'nodes_with_this_name': 'nodes in the ROS graph with this node\'s name and namespace '
+                            '(more than 1: every setpoint gets several commands)',
+    'last_closure_residual': 'max closure equation residual at the last served pose, m or rad',
+    'closure_condition_number': 'condition number of the closure Jacobian there',
+    'compute_time_median_us': 'from receipt of a setpoint to its command, last 1000',
+    'compute_time_max_us': 'the same, maximum',
+    'compute_time_samples': 'setpoints in the two figures above',
+    'seconds_since_last_setpoint': 'monotonic seconds since the last accepted setpoint',
+    'last_rejection': 'kind and message of the last rejected setpoint',
 }
 
 #: compute times kept for the diagnostics median and max (the last N setpoints)
 COMPUTE_TIME_WINDOW = 1000
+
+#: Python's thread switch interval in the node: the longest a thread holding the GIL keeps
+#: the setpoint thread waiting (Python's default is 5 ms)
+SWITCH_INTERVAL = 0.001
+
+
+def _guarded(method):
+    """A callback of the node that never ends it: an exception is counted and logged."""
+    @functools.wraps(method)
+    def guarded(self, *args):
+        try:
+            return method(self, *args)
+        except Exception as exc:   # noqa: BLE001 (no callback may end the node)
+            if self.context.ok():
+                self.internal_error(method.__name__, exc)
+            return None
+    return guarded
 
 
 class CogIdNode(Node):
     """Inverse dynamics of the mechanism in its parameters, served over topics."""
 
     def __init__(self, **kwargs):
-        super().__init__(NODE_NAME, automatically_declare_parameters_from_overrides=True, **kwargs)
-        self.mechanism = Mechanism.from_parameters(self._declare_mechanism_parameters())
+        super().__init__(NODE_NAME, **kwargs)
+        overrides = self._override_values()
+        self.mechanism = Mechanism.from_parameters(self._declare_mechanism_parameters(overrides))
         mech = self.mechanism
         self.active_joints = list(mech.active_joints)
         n_act = len(self.active_joints)
-        cfg = self._declare_node_parameters(n_act)
+        self.active_types = [mech.joint_types[mech.joints.index(j)] for j in self.active_joints]
+        cfg = self._declare_node_parameters(overrides, self.active_types)
+        self._check_qos_overrides(overrides)
+        self._make_use_sim_time_read_only()
         self.effort_limits = cfg['effort_limits']
         self.setpoint_timeout = cfg['setpoint_timeout']
         self.timeout_behavior = cfg['timeout_behavior']
         self.warning_period = cfg['warning_period']
+        self.unwrap = [cfg['unwrap_angles'] and t == 'revolute' for t in self.active_types]
+        self.max_step = cfg['max_setpoint_step']
+        self.max_stamp_lead_ns = cfg['max_stamp_lead'] * NANOSECONDS \
+            if math.isfinite(cfg['max_stamp_lead']) else math.inf
+        self.max_stamp_rejections = cfg['max_stamp_rejections']
+        self.max_trajectory_points = cfg['max_trajectory_points']
 
         self.solver = InverseDynamics(mech)              # the setpoint stream (warm-started)
-        self.trajectory_solver = InverseDynamics(mech)   # trajectories (reset for each one)
         self.report_solver = InverseDynamics(mech)       # residual and condition for diagnostics
         self.filter = SetpointFilter(n_act, cfg['estimator_window'], cfg['max_setpoint_interval'])
         self.selector = JointSelector(self.active_joints)
-        self.trajectory_selector = JointSelector(self.active_joints)
         self.outputs = EffortMessages(self.active_joints)
 
         # bookkeeping for diagnostics and the timeout
         self.counts = collections.Counter({'accepted': 0, 'trajectories_accepted': 0,
                                            'trajectories_rejected': 0, 'effort_clipped': 0,
-                                           'timeouts': 0})
+                                           'timeouts': 0, 'internal_errors': 0,
+                                           'setpoints_lost': 0, 'stamp_restarts': 0})
         self.rejected = collections.Counter({reason: 0 for reason in REASONS})
+        self.trajectory_rejected = collections.Counter(
+            {reason: 0 for reason in (*REASONS, *TRAJECTORY_REASONS)})
         self.compute_times = collections.deque(maxlen=COMPUTE_TIME_WINDOW)
         self.last_rejection = ''
         self.last_was_rejected = False
         self.last_pose = None                 # active positions of the last served setpoint
         self.limited = bool(np.isfinite(self.effort_limits).any())
+        self.checks_steps = bool(np.isfinite(self.max_step).any())
         self.last_setpoint_time = None        # monotonic receipt time of the last accepted one
         self.stream_stopped = True
+        self._stamp_rejections = 0            # consecutive setpoints rejected for their stamp
+        self._last_sequence = None            # publication sequence number of the last setpoint
+        self.same_name_nodes = 1              # nodes in the graph with this full name
         self._period_problems = 0             # rejections + clipping since the last report
         self._warned = {}                     # reason -> (monotonic time, suppressed count)
-        # joint_setpoint is served by a thread of its own (setpoint_loop.py), everything
-        # else by the executor: callbacks that touch the state above hold this lock
+        # joint_setpoint is served by a thread of its own (setpoint_loop.py), trajectories by
+        # a thread and a process of their own (TrajectoryWorker), everything else by the
+        # executor: callbacks that touch the state above hold this lock
         self.lock = threading.Lock()
 
         qos_options = QoSOverridingOptions.with_default_policies
@@ -158,24 +298,38 @@ class CogIdNode(Node):
         # ~7 us per wake-up, and an incompatible subscriber logs the mismatch on its side.
         # The subscriptions keep theirs: a setpoint publisher we cannot hear is reported here.
         lean = PublisherEventCallbacks(use_default_callbacks=False)
-        self.command_pub = self.create_publisher(
-            Float64MultiArray, 'effort_command', control_qos(), event_callbacks=lean,
-            qos_overriding_options=qos_options())
-        self.effort_pub = self.create_publisher(
-            JointState, 'joint_effort', control_qos(), event_callbacks=lean,
-            qos_overriding_options=qos_options())
-        self.trajectory_pub = self.create_publisher(
-            JointTrajectory, 'effort_trajectory', control_qos(), event_callbacks=lean,
-            qos_overriding_options=qos_options())
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10,
-                                                     event_callbacks=lean)
-        # The control-rate input: its own thread and wait set, outside the executor (see
-        # setpoint_loop.py). start() once the node is built; stop() before destroying it.
-        self.setpoint_loop = SetpointLoop(
-            self, JointState, 'joint_setpoint', self.serve_setpoint, control_qos(),
-            lock=self.lock, on_error=self._serve_failed, qos_overriding_options=qos_options())
-        self.create_subscription(JointTrajectory, 'joint_trajectory', self.on_trajectory,
-                                 control_qos(), qos_overriding_options=qos_options())
+        try:
+            self.command_pub = self.create_publisher(
+                Float64MultiArray, 'effort_command', control_qos(), event_callbacks=lean,
+                qos_overriding_options=qos_options())
+            self.effort_pub = self.create_publisher(
+                JointState, 'joint_effort', control_qos(), event_callbacks=lean,
+                qos_overriding_options=qos_options())
+            self.trajectory_pub = self.create_publisher(
+                JointTrajectory, 'effort_trajectory', control_qos(), event_callbacks=lean,
+                qos_overriding_options=qos_options())
+            self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10,
+                                                         event_callbacks=lean)
+            # The control-rate input: its own thread and wait set, outside the executor (see
+            # setpoint_loop.py). start() once the node is built; stop() before destroying it.
+            self.setpoint_loop = SetpointLoop(
+                self, JointState, 'joint_setpoint', self.serve_setpoint, control_qos(),
+                lock=self.lock, on_error=self._serve_failed, with_info=True,
+                qos_overriding_options=qos_options())
+            # taken serialized: the executor never deserialises a long trajectory (a C call
+            # that holds the GIL for seconds); the trajectory process does
+            self.create_subscription(JointTrajectory, 'joint_trajectory', self.on_trajectory,
+                                     control_qos(), qos_overriding_options=qos_options(),
+                                     raw=True)
+        except (rclpy.exceptions.ParameterException, RuntimeError, TypeError, ValueError) as exc:
+            raise MechanismConfigError(
+                'qos_overrides', f'cannot be honoured: {_one_line(exc)}') from None
+        self.trajectory_worker = TrajectoryWorker(
+            {'mechanism': dict(mech.parameters), 'active_joints': self.active_joints,
+             'unwrap': self.unwrap, 'max_step': self.max_step.tolist(),
+             'effort_limits': self.effort_limits.tolist() if self.limited else None,
+             'max_points': self.max_trajectory_points},
+            self._trajectory_done)
         self.create_timer(cfg['diagnostics_period'], self.publish_diagnostics)
         if self.setpoint_timeout > 0.0:
             self.create_timer(min(self.setpoint_timeout / 4.0, 0.25), self.check_timeout)
@@ -186,74 +340,154 @@ class CogIdNode(Node):
             f"{mech.dof} DOF, active joints {', '.join(self.active_joints)}"
             f"{' (redundant)' if mech.is_redundant else ''}; effort limits: {limits}; "
             f'setpoint timeout {self.setpoint_timeout:g} s ({self.timeout_behavior})')
+        for warning in getattr(mech, 'assembly_warnings', None) or ():
+            self.get_logger().warning(f'mechanism: {warning}')
+        # last: declaring a parameter (rclpy declares the QoS overrides) runs these callbacks
+        self.add_on_set_parameters_callback(self._refuse_parameter_changes)
+
+    def start(self):
+        """Start the setpoint thread and the trajectory worker (once the node is built)."""
+        self.setpoint_loop.start()
+        self.trajectory_worker.start()
+
+    def stop(self):
+        """Stop both (before the node is destroyed)."""
+        self.setpoint_loop.stop()
+        self.trajectory_worker.stop()
 
     # --- parameters --------------------------------------------------------------------------
 
-    def _declare_mechanism_parameters(self):
-        """Re-declare every mechanism parameter of the overrides read-only; return them."""
-        values = {}
-        for name, param in self._declared_overrides().items():
-            if name.startswith(MECHANISM_PREFIXES):
-                self.undeclare_parameter(name)
-                self.declare_parameters('', [(name, param.value, ParameterDescriptor(
-                    read_only=True, description='mechanism (read at start-up)'))],
-                    ignore_override=True)
-                values[name] = param.value
+    def _override_values(self):
+        """name -> value of every parameter given to the node (params files, -p).
+
+        Read from rclpy's overrides instead of declared from them automatically: rclpy
+        cannot declare a typed parameter from an empty YAML list (it has no type), which
+        must become a message naming the parameter, not a traceback. An empty list is [].
+        """
+        return {name: ([] if param.type_ == Parameter.Type.NOT_SET else param.value)
+                for name, param in self._parameter_overrides.items()}
+
+    def _declare(self, name, value, description):
+        """Declare ``name`` read-only with ``value`` (an empty list: no type, dynamic)."""
+        if isinstance(value, (list, tuple)) and len(value) == 0:
+            self.declare_parameter(name, None, ParameterDescriptor(
+                read_only=True, dynamic_typing=True, description=description),
+                ignore_override=True)
+            return
+        self.declare_parameter(name, value, ParameterDescriptor(
+            read_only=True, description=description), ignore_override=True)
+
+    def _declare_mechanism_parameters(self, overrides):
+        """Declare every mechanism parameter of the overrides read-only; return them."""
+        values = {name: value for name, value in overrides.items()
+                  if name.startswith(MECHANISM_PREFIXES)}
+        for name, value in values.items():
+            self._declare(name, value, 'mechanism (read at start-up)')
         return values
 
-    def _declare_node_parameters(self, n_act):
+    def _declare_node_parameters(self, overrides, active_types):
         """Declare the node's parameters read-only, from the overrides or the defaults."""
-        overrides = self._declared_overrides()
         known = set(NODE_PARAMETERS) | {'use_sim_time', 'start_type_description_service'}
         for name in sorted(overrides):
             if not name.startswith(MECHANISM_PREFIXES + ('qos_overrides.',)) and name not in known:
                 self.get_logger().warning(f"ignoring unknown parameter '{name}'")
         cfg = {}
-        for name, (default, description) in NODE_PARAMETERS.items():
-            value = overrides[name].value if name in overrides else default
-            value = _check_node_parameter(name, value, n_act)
-            if name in overrides:
-                self.undeclare_parameter(name)
+        for name, (_, default, description) in NODE_PARAMETERS.items():
+            value = overrides[name] if name in overrides else default
+            value = _check_node_parameter(name, value, active_types)
             declared = value.tolist() if isinstance(value, np.ndarray) else value
-            self.declare_parameters('', [(name, declared, ParameterDescriptor(
-                read_only=True, description=description))], ignore_override=True)
+            self._declare(name, declared, description)
             cfg[name] = value
-        for name in overrides:
-            if name.startswith('qos_overrides.'):
-                # declared again, read-only, when the publisher or subscription is created
-                self.undeclare_parameter(name)
         return cfg
 
-    def _declared_overrides(self):
-        """Parameters declared from the overrides (params files, -p) that are still writable."""
-        names = self.list_parameters([], 0).names
-        return {name: self.get_parameter(name) for name in names
-                if not self.describe_parameter(name).read_only}
+    def _check_qos_overrides(self, overrides):
+        """Every qos_overrides.* parameter names a policy the node honours, with a valid value.
+
+        rclpy would fail on them with a traceback while it creates the topics (a bogus
+        reliability, a negative or huge depth); here each becomes MechanismConfigError.
+        """
+        for name, value in overrides.items():
+            if not name.startswith('qos_overrides.'):
+                continue
+            policy = name.rsplit('.', 1)[-1]
+            if policy in QOS_OVERRIDE_VALUES:
+                if value not in QOS_OVERRIDE_VALUES[policy]:
+                    raise MechanismConfigError(
+                        name, f"must be one of {', '.join(QOS_OVERRIDE_VALUES[policy])}, "
+                              f'got {value!r}')
+            elif policy == 'depth':
+                if isinstance(value, bool) or not isinstance(value, int) \
+                        or not 1 <= value <= MAX_QOS_DEPTH:
+                    raise MechanismConfigError(
+                        name, f'must be an integer from 1 to {MAX_QOS_DEPTH}, got {value!r}')
+            else:
+                raise MechanismConfigError(
+                    name, 'the node honours only history, depth and reliability overrides '
+                          '(qos_overrides./<topic>.<publisher|subscription>.<policy>)')
+
+    def _make_use_sim_time_read_only(self):
+        """use_sim_time is read at start-up like every other parameter, then read-only.
+
+        Switched on at runtime without a /clock publisher it would freeze the node's clock:
+        no more /diagnostics, no hold command. rclpy declares it writable; the node
+        declares it again read-only, and once built refuses every parameter change with a
+        reason (``_refuse_parameter_changes``).
+        """
+        value = self.get_parameter('use_sim_time').value
+        self.undeclare_parameter('use_sim_time')
+        self.declare_parameter('use_sim_time', bool(value), ParameterDescriptor(
+            read_only=True, description='ROS time from /clock (read at start-up only)'),
+            ignore_override=True)
+
+    @_guarded
+    def _refuse_parameter_changes(self, parameters):
+        names = ', '.join(p.name for p in parameters)
+        return SetParametersResult(
+            successful=False,
+            reason=f'{names}: {NODE_NAME} reads its parameters once at start-up; they are '
+                   'read-only (restart the node with the new value)')
 
     # --- setpoints ---------------------------------------------------------------------------
 
-    def serve_setpoint(self, msg):
+    def serve_setpoint(self, msg, info=None):
         """One JointState setpoint -> effort_command + joint_effort, or a counted rejection.
 
         Called by the setpoint loop's thread with ``self.lock`` held, once per message, in
         the order received; every message that queued up while it worked is served next.
+        ``info``: rclpy's message info (the publisher's sequence number counts lost ones).
         """
         start = time.perf_counter()
+        if info is not None:
+            self._count_lost(info.get('publication_sequence_number'))
         try:
-            q, v = setpoint_arrays(msg, self.selector)
-            stamp = stamp_to_ns(msg.header.stamp) or self.get_clock().now().nanoseconds
+            received, v = setpoint_arrays(msg, self.selector)
+            stamp = stamp_to_ns(msg.header.stamp)
+            now = self.get_clock().now().nanoseconds
+            if not stamp:
+                stamp = now
+            elif stamp - now > self.max_stamp_lead_ns:
+                raise Rejected('stamp', f'stamp {stamp / NANOSECONDS:.9f} is '
+                               f'{(stamp - now) / NANOSECONDS:.6g} s ahead of the node\'s clock '
+                               f'(max_stamp_lead {self.max_stamp_lead_ns / NANOSECONDS:g} s): '
+                               'check the clock of the setpoint source')
+            try:
+                self.filter.check_stamp(stamp)
+            except StampError as exc:
+                self._stamp_rejections += 1
+                if not self.max_stamp_rejections or \
+                        self._stamp_rejections < self.max_stamp_rejections:
+                    raise Rejected('stamp', str(exc)) from None
+                self._restart_after_stamps(exc)
+            q = self._positions_used(stamp, received)
             v_used, a = self.filter.estimate(stamp, q, v)
             efforts = self.solver.sample_torques(q, v_used, a)   # the core's control-rate call
             if not all(map(math.isfinite, efforts)):
-                raise Rejected('singular', 'the torques are not finite at this setpoint')
+                raise Rejected('out_of_range', 'the torques are not finite at this setpoint')
         except Rejected as exc:
             self.reject(exc.reason, str(exc))
             return
-        except StampError as exc:
-            self.reject('stamp', str(exc))
-            return
         except CogIdError as exc:
-            bad = rejection(exc, self.mechanism.is_redundant)
+            bad = rejection(exc)
             self.reject(bad.reason, str(bad))
             return
         if self.limited:
@@ -261,8 +495,9 @@ class CogIdNode(Node):
             if self.clip(tau):
                 efforts = tau.tolist()
         self.command_pub.publish(self.outputs.command_for(efforts))   # first: what control waits for
-        self.effort_pub.publish(self.outputs.state_for(msg.header, q, v_used, efforts))
+        self.effort_pub.publish(self.outputs.state_for(msg.header, received, v_used, efforts))
         self.filter.accept(stamp, q, v)
+        self._stamp_rejections = 0
         self.counts['accepted'] += 1
         self.last_pose = q
         self.last_was_rejected = False
@@ -270,9 +505,61 @@ class CogIdNode(Node):
         self.stream_stopped = False
         self.compute_times.append(time.perf_counter() - start)
 
+    def _positions_used(self, stamp, received):
+        """The positions the setpoint is served at: unwrapped, checked for a jump.
+
+        Within a stream (the estimator has a history and no gap restarts it), revolute
+        active joints are taken as the 2 pi equivalent nearest the previous accepted
+        position (unwrap_angles), and a step larger than max_setpoint_step is rejected
+        ('jump'; the estimator restarts, so the next setpoint starts a new stream). The
+        first setpoint of a stream is taken as received.
+        """
+        previous = self.filter.last_positions
+        if previous is None or self.filter.restarts_at(stamp):
+            return received
+        q = [nearest_turn(x, ref) if wrap else x
+             for x, ref, wrap in zip(received, previous, self.unwrap)]
+        if self.checks_steps:
+            for joint, x, ref, limit in zip(self.active_joints, q, previous, self.max_step):
+                if abs(x - ref) > limit:
+                    self.filter.reset()
+                    raise Rejected('jump', f'{joint} moves by {abs(x - ref):.6g} from the previous '
+                                   f'setpoint (max_setpoint_step {limit:g}); the estimator '
+                                   'restarts: the next setpoint starts a new stream')
+        return q
+
+    def _restart_after_stamps(self, exc):
+        """max_stamp_rejections setpoints in a row came before the last accepted stamp: the
+        source's clock went back (or an earlier stamp was far ahead). Start a new stream."""
+        self.filter.reset()
+        self._stamp_rejections = 0
+        self.counts['stamp_restarts'] += 1
+        self.get_logger().warning(
+            f'{self.max_stamp_rejections} setpoints in a row stamped before the previous '
+            f'accepted one ({exc}): the estimator restarts, this setpoint starts a new stream')
+
+    def _count_lost(self, sequence):
+        """Count setpoints lost before they were taken (the publisher's sequence numbers).
+
+        Counted only while a single publisher feeds the topic: rclpy does not say which
+        publisher a message came from, so several publishers' numbers cannot be told apart.
+        """
+        last = self._last_sequence
+        self._last_sequence = sequence
+        if sequence is None or last is None or sequence == last + 1:
+            return
+        if sequence > last + 1 and self.setpoint_loop.subscription.get_publisher_count() == 1:
+            lost = sequence - last - 1
+            self.counts['setpoints_lost'] += lost
+            self._period_problems += 1
+            self.warn_throttled('lost', f'{lost} setpoint(s) lost before the node could take '
+                                        'them (subscription queue full, or the network)')
+
     def _serve_failed(self, exc):
         """A setpoint that failed in a way serve_setpoint does not expect (a bug): no
-        command, counted as 'solver', logged with its type; the next one is served."""
+        command, counted as 'solver' and in internal_errors, logged with its type; the
+        next one is served."""
+        self.counts['internal_errors'] += 1
         self.reject('solver', f'unexpected {type(exc).__name__}: {exc}')
 
     def clip(self, tau):
@@ -291,9 +578,9 @@ class CogIdNode(Node):
         self.last_rejection = f'{reason}: {text}'
         self.last_was_rejected = True
         self._period_problems += 1
-        self.warn_throttled(reason, f'setpoint rejected, no command: {text}')
+        self.warn_throttled(reason, f'setpoint rejected, no command ({reason}): {text}')
 
-    def warn_throttled(self, key, text):
+    def warn_throttled(self, key, text, error=False):
         """Log a warning at most once a warning_period per key; count the ones left out."""
         now = time.monotonic()
         last, suppressed = self._warned.get(key, (-math.inf, 0))
@@ -301,42 +588,68 @@ class CogIdNode(Node):
             self._warned[key] = (last, suppressed + 1)
             return
         more = f' ({suppressed} more like it since the last warning)' if suppressed else ''
-        self.get_logger().warning(text + more)
+        (self.get_logger().error if error else self.get_logger().warning)(text + more)
         self._warned[key] = (now, 0)
+
+    def internal_error(self, where, exc):
+        """An exception in one of the node's callbacks: counted, logged with its type."""
+        with self.lock:
+            self.counts['internal_errors'] += 1
+            self._period_problems += 1
+            self.warn_throttled('internal.' + where, f'{where} failed (the node goes on): '
+                                f'{type(exc).__name__}: {exc}', error=True)
 
     # --- trajectories ------------------------------------------------------------------------
 
-    def on_trajectory(self, msg):
-        """A whole JointTrajectory -> effort_trajectory, in one vectorised core call.
-
-        Solved without the lock (its own selector and solver), so the setpoint thread goes
-        on while a long trajectory is solved (the two threads share the GIL: a setpoint may
-        wait up to Python's switch interval, 5 ms); only the bookkeeping takes the lock.
-        """
-        try:
-            _, q, qd, qdd = trajectory_arrays(msg, self.trajectory_selector)
-            self.trajectory_solver.reset()
-            result = self.trajectory_solver.evaluate(q, qd, qdd, on_invalid='skip')
-            if not result.valid.all():
-                k = int(np.flatnonzero(~result.valid)[0])
-                bad = rejection(result.errors[k], self.mechanism.is_redundant)
-                raise Rejected(bad.reason, f'point {k}: {bad}')
-        except Rejected as exc:
-            with self.lock:
-                self.counts['trajectories_rejected'] += 1
-                self._period_problems += 1
-                self.warn_throttled('trajectory.' + exc.reason,
-                                    f'trajectory of {len(msg.points)} points rejected '
-                                    f'({exc.reason}), no effort_trajectory: {exc}')
+    @_guarded
+    def on_trajectory(self, raw):
+        """A serialized JointTrajectory: refused at once when too long, else handed to the
+        trajectory worker (a process of its own, see TrajectoryWorker; queue of one)."""
+        points = trajectory_point_count(raw)
+        if points is not None and points > self.max_trajectory_points:
+            self._trajectory_rejected(Rejected(
+                'too_long', f'{points} points, more than max_trajectory_points '
+                            f'({self.max_trajectory_points})'), points)
             return
-        tau = result.torques
+        replaced = self.trajectory_worker.submit(raw)
+        if replaced is not None:
+            self._trajectory_rejected(Rejected(
+                'busy', 'a newer trajectory arrived while it waited for the one being solved '
+                        '(one waits at most; the newest wins)'),
+                trajectory_point_count(replaced))
+
+    def _trajectory_rejected(self, exc, points):
         with self.lock:
-            self.clip(tau)
-            self.counts['trajectories_accepted'] += 1
-        self.trajectory_pub.publish(effort_trajectory(msg, self.active_joints, q, qd, qdd, tau))
+            self.counts['trajectories_rejected'] += 1
+            self.trajectory_rejected[exc.reason] += 1
+            self._period_problems += 1
+            size = '' if points is None else f' of {points} points'
+            self.warn_throttled('trajectory.' + exc.reason,
+                                f'trajectory{size} rejected ({exc.reason}), no '
+                                f'effort_trajectory: {exc}')
+
+    @_guarded
+    def _trajectory_done(self, result):
+        """Called by the trajectory worker's thread with the trajectory process's answer."""
+        kind = result[0]
+        if kind == 'ok':
+            _, out, clipped, _ = result
+            self.trajectory_pub.publish(out)
+            with self.lock:
+                self.counts['trajectories_accepted'] += 1
+                if clipped:
+                    self.counts['effort_clipped'] += 1
+                    self._period_problems += 1
+        elif kind == 'rejected':
+            _, reason, text, points = result
+            self._trajectory_rejected(Rejected(reason, text), points)
+        else:   # 'internal': the trajectory process failed or ended
+            self.internal_error('trajectory', RuntimeError(result[1]))
+            self._trajectory_rejected(Rejected('solver', result[1]), None)
 
     # --- timeout -----------------------------------------------------------------------------
 
+    @_guarded
     def check_timeout(self):
         """When setpoints stop: restart the estimator and apply timeout_behavior, once."""
         with self.lock:
@@ -350,6 +663,7 @@ class CogIdNode(Node):
         self.stream_stopped = True
         self.counts['timeouts'] += 1
         self.filter.reset()
+        self._stamp_rejections = 0
         n_act = len(self.active_joints)
         if self.timeout_behavior == 'none':
             what = 'nothing published'
@@ -370,13 +684,31 @@ class CogIdNode(Node):
 
     # --- diagnostics -------------------------------------------------------------------------
 
+    @_guarded
     def publish_diagnostics(self):
-        health = self.closure_health(self.last_pose)   # solved outside the lock
+        self.check_duplicate_names()
+        try:
+            health = self.closure_health(self.last_pose)   # solved outside the lock
+        except CogIdError:
+            health = (math.nan, math.nan)
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         with self.lock:
             msg.status = [self.diagnostic_status(*health)]
         self.diagnostics_pub.publish(msg)
+
+    def check_duplicate_names(self):
+        """Warn when other nodes in the graph have this node's name and namespace (each
+        would answer every setpoint too); checked at each diagnostics period."""
+        me = (self.get_name(), self.get_namespace())
+        count = sum(1 for entry in self.get_node_names_and_namespaces() if tuple(entry) == me)
+        count = max(count, 1)
+        if count > 1 and count != self.same_name_nodes:
+            self.get_logger().warning(
+                f'{count} nodes named {self.get_fully_qualified_name()} in the ROS graph: every '
+                'setpoint gets a command from each; give each node a namespace of its own '
+                '(-r __ns:=/name) or stop the others')
+        self.same_name_nodes = count
 
     def diagnostic_status(self, residual, condition):
         """The DiagnosticStatus of the node (``residual``, ``condition``: closure_health)."""
@@ -389,8 +721,12 @@ class CogIdNode(Node):
             status.message = f'last setpoint rejected ({self.last_rejection})'
         elif self._period_problems:
             status.level = DiagnosticStatus.WARN
-            status.message = (f'{self._period_problems} setpoint(s) rejected or clipped in the '
-                              f'last period')
+            status.message = (f'{self._period_problems} setpoint(s) or trajectories rejected, '
+                              'clipped or lost, or internal errors, in the last period')
+        elif self.same_name_nodes > 1:
+            status.level = DiagnosticStatus.WARN
+            status.message = (f'{self.same_name_nodes} nodes with this name: every setpoint '
+                              'gets a command from each')
         else:
             status.level = DiagnosticStatus.OK
             if self.last_setpoint_time is None:
@@ -409,10 +745,17 @@ class CogIdNode(Node):
             ('setpoints_accepted', self.counts['accepted']),
             ('setpoints_rejected', n_rejected),
             *((f'rejected.{reason}', count) for reason, count in self.rejected.items()),
+            ('setpoints_lost', self.counts['setpoints_lost']),
+            ('stamp_restarts', self.counts['stamp_restarts']),
             ('trajectories_accepted', self.counts['trajectories_accepted']),
             ('trajectories_rejected', self.counts['trajectories_rejected']),
+            *((f'trajectories_rejected.{reason}', count)
+              for reason, count in self.trajectory_rejected.items()),
+            ('trajectory_in_progress', str(self.trajectory_worker.busy).lower()),
             ('effort_clipped', self.counts['effort_clipped']),
             ('timeouts', self.counts['timeouts']),
+            ('internal_errors', self.counts['internal_errors']),
+            ('nodes_with_this_name', self.same_name_nodes),
             ('last_closure_residual', f'{residual:.3g}'),
             ('closure_condition_number', f'{condition:.4g}'),
             ('compute_time_median_us', f'{np.median(times):.1f}' if times.size else ''),
@@ -436,8 +779,110 @@ class CogIdNode(Node):
         return float(result.closure_residual[0]), float(result.condition_number[0])
 
 
-def _check_node_parameter(name, value, n_act):
+class TrajectoryWorker:
+    """Trajectories solved in a process of their own, fed by a thread of this process.
+
+    Deserialising, checking, solving and serialising a long trajectory takes seconds of
+    Python and C that hold the GIL (a 100,000-point one: ~7 s on the reference VM); done in
+    the node's process it stalled the setpoint thread and the timers. Here the node only
+    passes the serialized message (bytes) through a pipe to a process started with
+    ``spawn`` from the mechanism's parameters (:func:`ros_conversions.trajectory_process`),
+    and publishes the serialized answer it gets back: the node's threads are never held up
+    by more than copying bytes. One trajectory is solved at a time and at most one waits
+    (:meth:`submit` returns the one a newer one replaced). If the process dies (killed,
+    out of memory), the trajectory in progress is answered with ('internal', text) and a
+    new process is started for the next one.
+    """
+
+    def __init__(self, config, on_done):
+        self.config = config
+        self.on_done = on_done
+        self._cond = threading.Condition()
+        self._pending = None
+        self.busy = False
+        self._stopping = False
+        self._process = self._conn = None
+        self._thread = threading.Thread(target=self._run, name='trajectory worker', daemon=True)
+
+    def start(self):
+        self._start_process()
+        self._thread.start()
+
+    def submit(self, raw):
+        """Queue ``raw`` (a serialized JointTrajectory); returns the one it replaced, or None."""
+        with self._cond:
+            replaced, self._pending = self._pending, raw
+            self._cond.notify()
+        return replaced
+
+    def stop(self, timeout=5.0):
+        with self._cond:
+            self._stopping = True
+            self._pending = None
+            self._cond.notify()
+        self._end_process(timeout)
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    def _start_process(self):
+        context = multiprocessing.get_context('spawn')
+        parent, child = context.Pipe()
+        process = context.Process(target=trajectory_process, args=(child, self.config),
+                                  name='cog_id_node trajectories', daemon=True)
+        process.start()
+        child.close()
+        self._process, self._conn = process, parent
+
+    def _end_process(self, timeout=5.0):
+        process, conn = self._process, self._conn
+        self._process = self._conn = None
+        if conn is not None:
+            conn.close()            # the process reads EOF and ends
+        if process is not None:
+            process.join(timeout)
+            if process.is_alive():
+                process.terminate()
+                process.join(timeout)
+
+    def _run(self):
+        while True:
+            with self._cond:
+                while self._pending is None and not self._stopping:
+                    self._cond.wait()
+                if self._stopping:
+                    return
+                raw, self._pending = self._pending, None
+                self.busy = True
+            try:
+                result = self._solve(raw)
+            except Exception as exc:   # noqa: BLE001 (the worker thread must go on)
+                result = ('internal', f'{type(exc).__name__}: {exc}')
+            finally:
+                self.busy = False
+            if not self._stopping:
+                self.on_done(result)
+
+    def _solve(self, raw):
+        if self._process is None or not self._process.is_alive():
+            self._end_process(1.0)
+            self._start_process()
+        try:
+            self._conn.send_bytes(raw)
+            return self._conn.recv()
+        except (EOFError, OSError) as exc:
+            if self._stopping:
+                return ('internal', 'stopping')
+            code = self._process.exitcode if self._process is not None else None
+            self._end_process(1.0)
+            self._start_process()
+            return ('internal', f'the trajectory process ended ({type(exc).__name__}, exit code '
+                                f'{code}); a new one is started for the next trajectory')
+
+
+def _check_node_parameter(name, value, active_types):
     """The node parameter ``name`` as the type the node uses; MechanismConfigError if wrong."""
+    n_act = len(active_types)
+
     def fail(message):
         raise MechanismConfigError(name, message)
 
@@ -446,49 +891,79 @@ def _check_node_parameter(name, value, n_act):
             fail(f'must be a number, got {v!r}')
         return float(v)
 
-    if name == 'effort_limits':
+    def integer(v):
+        low, high = PARAMETER_BOUNDS[name]
+        if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
+            fail(f'must be an integer from {low} to {high}, got {v!r}')
+        return v
+
+    if name in ('effort_limits', 'max_setpoint_step'):
+        what = 'limit' if name == 'effort_limits' else 'step'
         if value is None or (isinstance(value, (list, tuple)) and len(value) == 0):
-            return np.full(n_act, math.inf)
-        if not isinstance(value, (list, tuple)) and not hasattr(value, '__len__'):
+            if name == 'effort_limits':
+                return np.full(n_act, math.inf)
+            return np.array([DEFAULT_MAX_STEP[t] for t in active_types])
+        if not isinstance(value, (list, tuple)):
             value = [value]
         limits = [number(v) for v in value]
         if len(limits) == 1:
             limits = limits * n_act
         if len(limits) != n_act:
-            fail(f'needs one limit per active joint ({n_act}) or one for all, got {len(limits)}')
+            fail(f'needs one {what} per active joint ({n_act}) or one for all, got {len(limits)}')
         if not all(lim > 0 for lim in limits):
-            fail(f'every limit must be > 0 (.inf for none), got {limits}')
+            fail(f'every {what} must be > 0 (.inf for none), got {limits}')
         return np.array(limits)
     if name == 'timeout_behavior':
         if value not in TIMEOUT_BEHAVIORS:
             fail(f"must be one of {', '.join(TIMEOUT_BEHAVIORS)}, got {value!r}")
         return value
-    if name == 'estimator_window':
-        if isinstance(value, bool) or not isinstance(value, int) or not 3 <= value <= 8:
-            fail(f'must be an integer from 3 to 8, got {value!r}')
+    if name == 'unwrap_angles':
+        if not isinstance(value, bool):
+            fail(f'must be true or false, got {value!r}')
         return value
+    if name in ('estimator_window', 'max_stamp_rejections', 'max_trajectory_points'):
+        return integer(value)
     value = number(value)
-    if name == 'setpoint_timeout':
-        if not value >= 0.0:
-            fail(f'must be >= 0 (0: no timeout), got {value!r}')
-    elif not value > 0.0 or not math.isfinite(value):
-        fail(f'must be a positive number of seconds, got {value!r}')
+    low, high = PARAMETER_BOUNDS[name]
+    if name == 'setpoint_timeout' and value == 0.0:
+        return value
+    if name == 'max_stamp_lead' and value == math.inf:
+        return value
+    if not low <= value <= high:
+        extra = ' (or 0: no timeout)' if name == 'setpoint_timeout' else \
+            ' (or .inf: no check)' if name == 'max_stamp_lead' else ''
+        fail(f'must be from {low:g} to {high:g} s{extra}, got {value!r}')
     return value
 
 
 def main(args=None):
     """Start the node and spin until Ctrl-C or SIGTERM (exit status 0).
 
-    A parameter that cannot be honoured: exit status 2 and one line naming it. A stop
-    signal that arrives while the node is being built is noted and acted on once it is
-    built (see :mod:`cog_id_ros.stop_signals`), so it stops the node cleanly too.
+    ``-h``/``--help`` (before ``--ros-args``): the usage, exit status 0. A parameter that
+    cannot be honoured, or a params file rcl cannot parse: exit status 2 and one line
+    naming it. A stop signal that arrives while the node is being built is noted and
+    acted on once it is built (see :mod:`cog_id_ros.stop_signals`), so it stops the node
+    cleanly too. No exception of a callback ends the node (they are counted in
+    diagnostics as ``internal_errors``).
     """
+    argv = sys.argv[1:] if args is None else list(args[1:])
+    own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
+    if '-h' in own or '--help' in own:
+        print(USAGE, end='')
+        return 0
+    problem = params_file_problem(argv)
+    if problem:
+        print(f'{NODE_NAME}: cannot start: {problem}', file=sys.stderr)
+        return 2
     stop = stop_signals.DeferredStop()
     try:
-        rclpy.init(args=args, signal_handler_options=stop.RCLPY_OPTIONS)
+        with _stderr_held() as held:
+            rclpy.init(args=args, signal_handler_options=stop.RCLPY_OPTIONS)
     except Exception as exc:   # noqa: BLE001 (e.g. a params file rcl cannot parse)
-        print(f'{NODE_NAME}: cannot start: {_one_line(exc)}', file=sys.stderr)
+        print(f'{NODE_NAME}: cannot start: {_rcl_message(exc)}', file=sys.stderr)
         return 2
+    held.replay()
+    sys.setswitchinterval(SWITCH_INTERVAL)
     node = None
     try:
         node = CogIdNode()
@@ -499,26 +974,147 @@ def main(args=None):
         # pause (~10 ms on the reference VM) becomes microseconds.
         gc.collect()
         gc.freeze()
-        node.setpoint_loop.start()
+        node.start()
         if stop.hand_over() is None:   # no stop asked for during start-up
-            executor.spin()
+            _spin(executor, node)
     except (MechanismConfigError, rclpy.exceptions.InvalidParameterTypeException,
             rclpy.exceptions.InvalidParameterValueException) as exc:
         print(f'{NODE_NAME}: cannot start: {_one_line(exc)}', file=sys.stderr)
         return 2
     except ExternalShutdownException:
         pass   # Ctrl-C or SIGTERM: rclpy's signal handler has shut the context down
-    except Exception:   # noqa: BLE001
+    except Exception as exc:   # noqa: BLE001
         if rclpy.ok():
+            if node is None:   # start-up: an error rclpy raised for something we did not check
+                print(f'{NODE_NAME}: cannot start: {type(exc).__name__}: {_one_line(exc)}',
+                      file=sys.stderr)
+                return 2
             raise
         # the signal shut the context down between two turns of spin(), whose next wait set
         # then fails on the dead context (an RCLError): a clean stop too
     finally:
         if node is not None:
-            node.setpoint_loop.stop()
+            node.stop()
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _spin(executor, node):
+    """executor.spin(), except that an exception out of a callback does not end it.
+
+    Every callback of the node is guarded (_guarded); this catches what is left, e.g. an
+    exception rclpy raises around a callback, counts and logs it, and spins on.
+    """
+    while True:
+        try:
+            executor.spin()
+            return
+        except ExternalShutdownException:
+            raise
+        except Exception as exc:   # noqa: BLE001
+            if not rclpy.ok():
+                raise
+            node.internal_error('executor', exc)
+
+
+def params_file_problem(argv):
+    """A sentence naming the first parameter of a ``--params-file`` rcl would refuse, or None.
+
+    rcl's own message names a line of the file, not the parameter, and comes with a
+    second log line; the files are read here first (PyYAML) for what rcl refuses: arrays
+    that mix integers and doubles or other types, nested arrays, empty values.
+    """
+    files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
+    for path in files:
+        try:
+            with open(path, encoding='utf-8') as stream:
+                document = yaml.safe_load(stream)
+        except OSError as exc:
+            return f'--params-file {path}: cannot read it: {exc.strerror}'
+        except yaml.YAMLError as exc:
+            where = getattr(exc, 'problem_mark', None)
+            line = f' (line {where.line + 1})' if where is not None else ''
+            what = getattr(exc, 'problem', None) or 'syntax error'
+            return f'--params-file {path}: not valid YAML{line}: {what}'
+        if not isinstance(document, dict):
+            return f'--params-file {path}: holds no node entries (/**: ros__parameters: ...)'
+        for entry, body in document.items():
+            params = body.get('ros__parameters') if isinstance(body, dict) else None
+            if not isinstance(params, dict):
+                return f"--params-file {path}: entry '{entry}' has no ros__parameters mapping"
+            for name, value in _flat(params):
+                problem = _rcl_value_problem(value)
+                if problem:
+                    return f'{name}: {problem} (in --params-file {path})'
+    return None
+
+
+def _flat(params, prefix=''):
+    for key, value in params.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, dict):
+            yield from _flat(value, name + '.')
+        else:
+            yield name, value
+
+
+def _rcl_value_problem(value):
+    """Why rcl's parameter parser would refuse ``value`` (from PyYAML), or None."""
+    if value is None:
+        return 'has no value'
+    if not isinstance(value, list):
+        return None
+    kinds = set()
+    for item in value:
+        if isinstance(item, (list, dict)) or item is None:
+            return f'an array may hold numbers, booleans or strings only, got {value!r}'
+        kinds.add(bool if isinstance(item, bool) else int if isinstance(item, int)
+                  else float if isinstance(item, float) else str)
+    if kinds == {int, float}:
+        return (f'the array mixes integers and doubles ({value!r}): write every number as a '
+                'double (0.0, not 0)')
+    if len(kinds) > 1:
+        return f'the array mixes types ({value!r}): rcl needs one type per array'
+    return None
+
+
+def _rcl_message(exc):
+    """rcl's message for a command line it refused, in one line without its source lines."""
+    text = _one_line(exc)
+    text = text.replace('failed to initialize rcl: ', '')
+    return re.sub(r',? at /\S+:\d+', '', text)
+
+
+class _stderr_held:
+    """Holds what C code writes to file descriptor 2 (rcl's "Failed to parse global
+    arguments" log line) until replay(); dropped when the block raises."""
+
+    def __enter__(self):
+        self._saved = None
+        self._file = tempfile.TemporaryFile()
+        try:
+            sys.stderr.flush()
+            self._saved = os.dup(2)
+            os.dup2(self._file.fileno(), 2)
+        except OSError:
+            self._saved = None
+        return self
+
+    def __exit__(self, *exc_info):
+        if self._saved is not None:
+            os.dup2(self._saved, 2)
+            os.close(self._saved)
+            self._saved = None
+        return False
+
+    def replay(self):
+        self._file.seek(0)
+        text = self._file.read()
+        self._file.close()
+        if text:
+            sys.stderr.buffer.write(text)
+            sys.stderr.flush()
 
 
 def _one_line(exc):

@@ -5,6 +5,7 @@ says what is wrong with a :class:`Rejected` that carries a short ``reason`` (the
 node counts in diagnostics) and a sentence for the log.
 """
 import math
+import struct
 
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -12,7 +13,6 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from . import derivatives
-from .core import ClosureError, SetpointError, SingularConfigurationError
 
 NANOSECONDS = 1_000_000_000
 
@@ -22,36 +22,49 @@ REASONS = {
     'malformed': 'arrays of unequal length, or duplicate joint names',
     'missing_joint': 'an active joint is not in the message',
     'non_finite': 'a position, velocity or acceleration of an active joint is NaN or infinite',
-    'stamp': 'the header stamp does not come after the previous accepted setpoint',
+    'out_of_range': 'a finite value too large to compute with (the torques would overflow)',
+    'stamp': 'the header stamp does not come after the previous accepted setpoint, or is '
+             'more than max_stamp_lead ahead of the node\'s clock',
+    'jump': 'an active joint moved farther than max_setpoint_step since the previous '
+            'setpoint (after unwrapping revolute joints)',
     'closure': 'the loops cannot be closed at this pose',
+    'unreachable': 'the pose cannot be reached from the previous one by continuation',
     'singular': 'the pose is singular (closure Jacobian condition number too large)',
     'inconsistent': 'the redundant active coordinates disagree with the loop closure',
     'solver': 'any other setpoint the solver refuses',
 }
+
+#: reasons a whole trajectory can be refused for besides those of REASONS (its points)
+TRAJECTORY_REASONS = {
+    'too_long': 'more points than max_trajectory_points',
+    'busy': 'a newer trajectory arrived while this one waited for the solver (queue of one)',
+}
+
+#: every core error reason (cog_id_ros.core.errors.REASONS) is a key of REASONS
+_CORE_REASONS = ('malformed', 'non_finite', 'out_of_range', 'closure', 'unreachable',
+                 'singular', 'inconsistent')
 
 
 class Rejected(ValueError):
     """A setpoint or trajectory that gets no command: ``reason`` is a key of REASONS."""
 
     def __init__(self, reason, message):
-        assert reason in REASONS, reason
+        assert reason in REASONS or reason in TRAJECTORY_REASONS, reason
         self.reason = reason
         super().__init__(message)
 
 
-def rejection(exc, redundant):
-    """The Rejected for a core exception (ClosureError, SingularConfigurationError, ...)."""
-    if isinstance(exc, SingularConfigurationError):
-        return Rejected('singular', str(exc))
-    if isinstance(exc, ClosureError):
-        # the core raises ClosureError both for a loop that cannot close and for a
-        # redundant setpoint that over-determines the pose inconsistently
-        if redundant and 'redundant setpoint' in str(exc):
-            return Rejected('inconsistent', str(exc))
-        return Rejected('closure', str(exc))
-    if isinstance(exc, SetpointError):
-        return Rejected('non_finite' if 'finite' in str(exc) else 'malformed', str(exc))
-    return Rejected('solver', str(exc))
+def rejection(exc, redundant=None):
+    """The Rejected for a core exception, by its machine-readable ``reason``.
+
+    Every reason of the core's errors (cog_id_ros.core.errors.REASONS) is a reason here
+    too; an exception without one (or with one this module does not know) is 'solver'.
+    ``redundant`` is no longer needed (kept for callers that still pass it).
+    """
+    reason = getattr(exc, 'reason', None)
+    if reason not in REASONS or reason in ('empty', 'missing_joint', 'stamp', 'jump'):
+        reason = 'solver'
+    return Rejected(reason, str(exc))
 
 
 def stamp_to_ns(stamp):
@@ -133,12 +146,17 @@ def setpoint_arrays(msg, selector):
     return q, v
 
 
-def trajectory_arrays(msg, selector):
+def trajectory_arrays(msg, selector, unwrap=None, max_step=None):
     """(time_from_start (N,), q (N, M), qd (N, M), qdd (N, M)) of a JointTrajectory.
 
     Every point needs positions; velocities and accelerations are either on every point
     or on none (then estimated from the positions over time_from_start, the scheme of
     :mod:`cog_id_ros.derivatives`, which needs 5 or more points). Raises Rejected.
+
+    ``unwrap`` (M booleans, optional): those columns (revolute joints) are unwrapped
+    before they are differentiated, each point taken as the 2 pi equivalent nearest the
+    previous one; ``q`` is returned as received. ``max_step`` (M numbers, optional): a
+    larger step between consecutive points (after unwrapping) is rejected ('jump').
     """
     points = msg.points
     if not points:
@@ -163,17 +181,119 @@ def trajectory_arrays(msg, selector):
                            f'{values[k, a]} (must be finite)')
         fields[field] = values
     q, qd, qdd = fields['positions'], fields['velocities'], fields['accelerations']
+    q_used = unwrapped_columns(q, unwrap)
+    if max_step is not None and len(q_used) > 1:
+        steps = np.abs(np.diff(q_used, axis=0))
+        over = steps > np.asarray(max_step, float)
+        if over.any():
+            k, a = np.argwhere(over)[0]
+            raise Rejected('jump', f'point {k + 1}: {selector.active_joints[a]} moves by '
+                           f'{steps[k, a]:.6g} from the previous point (max_setpoint_step '
+                           f'{max_step[a]:g}; revolute joints are compared after unwrapping)')
     if qd is None or qdd is None:
         if len(points) < derivatives.STENCIL or not (np.diff(times) > 0).all():
             raise Rejected('malformed', 'trajectory without velocities or accelerations needs '
                            f'{derivatives.STENCIL} or more points with increasing time_from_start '
                            'to estimate them')
         if qd is None:
-            qd = derivatives.first_derivative(times, q)
+            qd = derivatives.first_derivative(times, q_used)
         if qdd is None:
-            qdd = derivatives.second_derivative(times, q) if fields['velocities'] is None \
+            qdd = derivatives.second_derivative(times, q_used) if fields['velocities'] is None \
                 else derivatives.first_derivative(times, qd)
     return times, q, qd, qdd
+
+
+def unwrapped_columns(q, unwrap):
+    """``q`` (N, M) with the columns flagged in ``unwrap`` unwrapped (a copy), else ``q``."""
+    if unwrap is None or not any(unwrap) or len(q) < 2:
+        return q
+    out = np.array(q, dtype=float)
+    cols = np.flatnonzero(np.asarray(unwrap, bool))
+    out[:, cols] = np.unwrap(out[:, cols], axis=0)
+    return out
+
+
+def nearest_turn(value, reference):
+    """``value`` plus the multiple of 2 pi that brings it nearest ``reference``."""
+    turns = round((reference - value) / (2.0 * math.pi))
+    return value + turns * 2.0 * math.pi if turns else value
+
+
+def trajectory_point_count(raw):
+    """Number of points of a serialized (CDR) JointTrajectory, read from its header alone.
+
+    Cheap (no deserialisation), so a trajectory too long to solve can be refused before it
+    costs anything. None when the bytes are not a JointTrajectory this function can read.
+    """
+    try:
+        if len(raw) < 4 or raw[0] != 0 or raw[1] not in (0, 1):
+            return None
+        order = '<' if raw[1] == 1 else '>'
+        body = memoryview(raw)[4:]
+        pos = 8                                          # stamp: int32 sec, uint32 nanosec
+
+        def u32(at):
+            at = (at + 3) & ~3
+            return struct.unpack_from(order + 'I', body, at)[0], at + 4
+
+        length, pos = u32(pos)                           # frame_id (length with its NUL)
+        pos += length
+        count, pos = u32(pos)                            # joint_names
+        if count > len(body):
+            return None
+        for _ in range(count):
+            length, pos = u32(pos)
+            pos += length
+        points, _ = u32(pos)
+        return points
+    except (struct.error, IndexError, TypeError):
+        return None
+
+
+def solve_trajectory_message(raw, solver, selector, *, unwrap=None, max_step=None,
+                             effort_limits=None, max_points=None):
+    """A serialized JointTrajectory -> (serialized effort_trajectory, clipped, points).
+
+    The whole trajectory path of the node, run in its trajectory process (see
+    ``cog_id_ros.node.TrajectoryWorker``): deserialise, check, solve in one vectorised
+    core call, clip to ``effort_limits``, build and serialise the answer. Raises Rejected
+    (with the number of points in ``points``) for a trajectory that gets no answer.
+    """
+    from rclpy.serialization import deserialize_message, serialize_message
+    count = trajectory_point_count(raw)
+    if max_points is not None and count is not None and count > max_points:
+        exc = Rejected('too_long', f'{count} points, more than max_trajectory_points '
+                                   f'({max_points})')
+        exc.points = count
+        raise exc
+    msg = deserialize_message(raw, JointTrajectory)
+    points = len(msg.points)
+    try:
+        if max_points is not None and points > max_points:
+            raise Rejected('too_long', f'{points} points, more than max_trajectory_points '
+                                       f'({max_points})')
+        _, q, qd, qdd = trajectory_arrays(msg, selector, unwrap, max_step)
+        solver.reset()
+        result = solver.evaluate(q, qd, qdd, on_invalid='skip')
+        if not result.valid.all():
+            k = int(np.flatnonzero(~result.valid)[0])
+            bad = rejection(result.errors[k])
+            raise Rejected(bad.reason, f'point {k}: {bad}')
+        tau = np.array(result.torques, dtype=float)
+        if not np.isfinite(tau).all():
+            k = int(np.argwhere(~np.isfinite(tau))[0][0])
+            raise Rejected('out_of_range', f'point {k}: the torques are not finite')
+    except Rejected as exc:
+        exc.points = points
+        raise
+    clipped = False
+    if effort_limits is not None:
+        limits = np.asarray(effort_limits, float)
+        if not (np.abs(tau) <= limits).all():
+            np.clip(tau, -limits, limits, out=tau)
+            clipped = True
+    out = effort_trajectory(msg, selector.active_joints, q, qd, qdd, tau)
+    return serialize_message(out), clipped, points
 
 
 def effort_trajectory(msg, active_joints, q, qd, qdd, tau):
@@ -209,3 +329,38 @@ class EffortMessages:
         state.velocity = velocities
         state.effort = efforts
         return state
+
+
+def trajectory_process(conn, config):
+    """Main function of the node's trajectory process (``multiprocessing``, spawn).
+
+    ``config``: ``mechanism`` (the mechanism's parameters), ``active_joints``, ``unwrap``,
+    ``max_step``, ``effort_limits`` (or None), ``max_points``. Reads serialized
+    JointTrajectory messages from ``conn`` until EOF (the node closed its end, or ended)
+    and answers each with ('ok', serialized effort_trajectory, clipped, points),
+    ('rejected', reason, text, points) or ('internal', text). Ignores SIGINT: Ctrl-C in a
+    terminal reaches the whole process group, and the node ends this process itself.
+    """
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from .core import InverseDynamics, Mechanism
+    solver = InverseDynamics(Mechanism.from_parameters(config['mechanism']))
+    selector = JointSelector(config['active_joints'])
+    options = dict(unwrap=config['unwrap'], max_step=config['max_step'],
+                   effort_limits=config['effort_limits'], max_points=config['max_points'])
+    while True:
+        try:
+            raw = conn.recv_bytes()
+        except (EOFError, OSError):
+            return
+        try:
+            out, clipped, points = solve_trajectory_message(raw, solver, selector, **options)
+            answer = ('ok', out, clipped, points)
+        except Rejected as exc:
+            answer = ('rejected', exc.reason, str(exc), getattr(exc, 'points', None))
+        except Exception as exc:   # noqa: BLE001 (answer every trajectory)
+            answer = ('internal', f'{type(exc).__name__}: {exc}')
+        try:
+            conn.send(answer)
+        except (EOFError, OSError):
+            return

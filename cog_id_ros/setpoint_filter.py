@@ -74,6 +74,11 @@ class SetpointFilter:
         """Number of setpoints the next estimate can use besides its own."""
         return len(self._history)
 
+    @property
+    def last_positions(self):
+        """Positions of the newest accepted setpoint (a list), or None after a restart."""
+        return self._history[0][1] if self._history else None
+
     def restarts_at(self, stamp_ns):
         """True when a setpoint at ``stamp_ns`` starts a new stream (no usable history)."""
         if not self._history:

@@ -50,13 +50,16 @@ class SetpointLoop:
     message queued when the thread wakes is served before it waits again. ``lock``, when
     given, is held around each callback. An exception from a callback is passed to
     ``on_error(exc)`` (default: logged by the node), with the lock still held, and the
-    loop goes on.
+    loop goes on; so does an exception from taking a message. ``with_info``: the callback
+    is ``callback(msg, info)``, ``info`` rclpy's message info dict (source and received
+    timestamps, the publisher's ``publication_sequence_number``).
     """
 
     def __init__(self, node, msg_type, topic, callback, qos_profile, *, lock=None,
-                 on_error=None, **subscription_kwargs):
+                 on_error=None, with_info=False, **subscription_kwargs):
         self.node = node
         self.callback = callback
+        self.with_info = with_info
         self._held = contextlib.nullcontext() if lock is None else lock
         self.on_error = on_error or self._log_error
         self.subscription = node.create_subscription(
@@ -128,20 +131,37 @@ class SetpointLoop:
                 if event.is_ready(wait_set):
                     self._handle_event(event)
             while not self._stopping:
-                taken = handle.take_message(msg_type, raw)
+                try:
+                    taken = handle.take_message(msg_type, raw)
+                except Exception as exc:   # noqa: BLE001 (e.g. a message that cannot be taken)
+                    if not context.ok():
+                        return
+                    self._take_failed(exc)
+                    break
                 if taken is None:
                     break
-                self._serve(taken[0])
+                self._serve(taken)
             if not context.ok():
                 return
 
-    def _serve(self, msg):
+    def _serve(self, taken):
         with self._held:
             try:
-                self.callback(msg)
+                if self.with_info:
+                    self.callback(taken[0], taken[1])
+                else:
+                    self.callback(taken[0])
             except Exception as exc:   # noqa: BLE001 (the loop must outlive a bad message)
                 if self.node.context.ok():
                     self.on_error(exc)
+
+    def _take_failed(self, exc):
+        """Taking a message failed: reported like a callback error; the loop waits again."""
+        with self._held:
+            try:
+                self.on_error(exc)
+            except Exception:   # noqa: BLE001
+                pass
 
     def _handle_event(self, event):
         data = event.take_data()

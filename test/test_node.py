@@ -187,8 +187,13 @@ _last_stamp = [int(time.time()) * NS]
 
 
 def fresh_stamp(after=None):
-    """A stamp 1 s after the previous one (or ``after``): the estimator restarts, a = 0."""
-    _last_stamp[0] = max(_last_stamp[0], after or 0) + NS
+    """A stamp 0.2 s after the previous one (or ``after``), and not before now: the
+    estimator restarts (max_setpoint_interval 0.1 s), a = 0, and the stamp is never far
+    ahead of the node's clock (max_stamp_lead, 1 s)."""
+    _last_stamp[0] = max(_last_stamp[0], after or 0, time.time_ns() - NS // 5) + NS // 5
+    ahead = _last_stamp[0] - time.time_ns()
+    if ahead > NS // 2:
+        time.sleep((ahead - NS // 2) / NS)
     return _last_stamp[0]
 
 
@@ -301,7 +306,7 @@ def test_zero_stamps_use_the_receipt_time(nodes, mechanisms):
     np.testing.assert_allclose(first.effort, resting_torque(mechanisms['a'], [1.40]), atol=1e-9)
     assert second.velocity[0] > 0.0          # 0.01 rad over the time between the two receipts
     assert np.isfinite(second.effort[0])
-    fresh_stamp(after=time.time_ns() + 10 * NS)   # stamped setpoints after these receipt times
+    fresh_stamp(after=time.time_ns())   # stamped setpoints after these receipt times
 
 
 # --- bad setpoints -------------------------------------------------------------------------
@@ -365,8 +370,13 @@ def test_pose_where_the_loop_cannot_close(nodes, tmp_path_factory):
     procs, probes = nodes
     mech = cog_id_ros.Mechanism.from_parameters(
         __import__('yaml').safe_load(NON_GRASHOF)['/**']['ros__parameters'])
-    check_bad_setpoint_then_good(probes['d'], mech, 'closure', _bad(['joint1'], [1.5]), [0.5], 'd')
-    assert 'loops cannot be closed' in procs['d'].output
+    solver = cog_id_ros.InverseDynamics(mech)     # the core says which kind this is
+    solver.sample_torques([0.5], [0.0], [0.0])
+    with pytest.raises(cog_id_ros.ClosureError) as info:
+        solver.sample_torques([1.5], [0.0], [0.0])
+    reason = info.value.reason                   # 'closure' or 'unreachable'
+    check_bad_setpoint_then_good(probes['d'], mech, reason, _bad(['joint1'], [1.5]), [0.5], 'd')
+    assert f'no command ({reason})' in procs['d'].output
 
 
 def test_inconsistent_redundant_setpoint(nodes, mechanisms):
@@ -569,7 +579,7 @@ def test_diagnostics_report_counts_residual_condition_and_compute_time(nodes):
         kv = values(status)
         assert status.hardware_id and kv['mechanism'] == status.hardware_id
         for reason in ('empty', 'malformed', 'missing_joint', 'non_finite', 'stamp', 'closure',
-                       'singular', 'inconsistent'):
+                       'unreachable', 'singular', 'inconsistent', 'jump', 'out_of_range'):
             assert int(kv[f'rejected.{reason}']) == EXPECTED_REJECTIONS[key][reason], (key, reason)
         assert int(kv['setpoints_rejected']) == sum(EXPECTED_REJECTIONS[key].values())
         assert int(kv['setpoints_accepted']) > 0
