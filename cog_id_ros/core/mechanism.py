@@ -1,19 +1,28 @@
 """Mechanism: a validated description of links, joints and actuators, ready to solve.
 
 Built from a ROS 2 parameter file (``from_params_file``; README, "Mechanism parameter
-file", and docs/mechanism.md for limits and defaults) or from the dotted names rclpy gives a node (``from_parameters``). Everything a user can get
-wrong raises MechanismConfigError naming the parameter. At load the mechanism is assembled
-near ``initial_positions``, its degrees of freedom are read off the rank of the closure
-Jacobian there, and the actuators are checked to determine the motion.
+file", and docs/mechanism.md for the limits and defaults) or from the dotted names rclpy
+gives a node (``from_parameters``). Everything a user can get wrong raises
+MechanismConfigError naming the parameter. At load the mechanism is assembled near
+``initial_positions`` (actuators held), its degrees of freedom are read off the rank of the
+closure Jacobian there, and the actuators are checked to determine the motion. What the
+assembly had to change is reported in ``assembly_warnings`` (and as AssemblyWarning).
+
+Sizes are checked first (MAX_JOINTS and friends), before anything whose cost grows faster
+than the size of the file; values are checked against documented bounds (MAX_LENGTH and
+friends) so that finite, moderate setpoints never produce an infinite torque.
 """
 import itertools
 import math
+import re
+import warnings
 
 import numpy as np
 
 from . import closure
 from . import spatial as sp
 from .errors import MechanismConfigError
+from . import kinematics as kin
 from .kinematics import BASE, JointSpec, KinematicModel
 from .params import DEFAULT_NODE_NAME, ParameterReader, load_params_file
 
@@ -30,6 +39,41 @@ DEFAULT_MAX_CONDITION_NUMBER = 1e6     # closure Jacobian (passive joints), Frob
 DEFAULT_CLOSURE_TOLERANCE = 1e-10      # m or rad: a loop counts as closed below this residual
 RANK_TOLERANCE = 1e-9                  # relative singular value below which A loses rank
 
+# --- bounds on values (docs/mechanism.md): a mechanism within them, driven by finite
+# moderate setpoints, never produces an infinite torque
+MAX_LENGTH = 1e6            # m: every entry of com, parent_xyz, child_xyz
+MAX_COORDINATE = 1e6        # rad or m: initial_positions, parent_rpy, child_rpy
+MAX_MASS = 1e9              # kg
+MAX_INERTIA = 1e12          # kg m^2: every inertia entry
+MAX_GRAVITY = 1e4           # m/s^2: length of the gravity vector
+MIN_TORQUE_WEIGHT, MAX_TORQUE_WEIGHT = 1e-9, 1e9
+MAX_CLOSURE_TOLERANCE = 1e-3          # m or rad: a looser "closed" loop gives wrong torques
+MAX_CONDITION_NUMBER_LIMIT = 1e15     # beyond this double precision keeps no digit
+
+# --- size limits (docs/mechanism.md), checked before anything expensive. The solver's work
+# at load grows with links x active joints (the COG Jacobians G_i, traced into straight-line
+# code) and with the cube of the loop count (dense QR of the closure Jacobian); these keep
+# loading within a few seconds and a few hundred MB.
+MAX_JOINTS = 200
+MAX_LINKS = 200
+MAX_LOOPS = 40
+MAX_ACTIVE_JOINTS = 100
+MAX_JACOBIAN_COLUMNS = 5000   # links x active joints
+
+#: names of links and joints become components of ROS 2 parameter names
+#: (``links.<link>.mass``): letters, digits and '_', not starting with a digit
+NAME_PATTERN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*\Z')
+
+#: assembly that moves a passive joint further than this from initial_positions is reported
+#: (rad for revolute joints; for prismatic ones this fraction of the mechanism's scale)
+FAR_ANGLE = 0.1
+FAR_FRACTION = 0.1
+
+
+class AssemblyWarning(UserWarning):
+    """Assembly at load had to move joints away from ``initial_positions``: the mechanism
+    loaded, but its geometry or initial positions are probably not what was meant."""
+
 
 class Mechanism:
     """Links, joints and actuators of a (closed-link) mechanism; see docs/mechanism.md."""
@@ -37,13 +81,22 @@ class Mechanism:
     def __init__(self, params):
         reader = ParameterReader(params)
         self.parameters = dict(reader.params)
+        self.assembly_warnings = []
+        self._deferred_error = None
+        self._moved_actuators = None
         self._read_mechanism(reader)
         self._read_links(reader)
         self._read_joints(reader)
         self._reject_unknown(reader)
         self.model = KinematicModel(self.links, self.joint_specs)
-        self._assemble()
-        self._count_degrees_of_freedom()
+        try:
+            self._assemble()
+            self._count_degrees_of_freedom()
+        except (np.linalg.LinAlgError, ArithmeticError, FloatingPointError) as exc:
+            raise MechanismConfigError(
+                'mechanism.initial_positions',
+                f'the mechanism could not be analysed at these positions ({exc}); check the '
+                f'geometry and initial_positions') from None
 
     @classmethod
     def from_parameters(cls, params):
@@ -66,6 +119,9 @@ class Mechanism:
         self.links = r.string_list('mechanism.links', required=True)
         self.joints = r.string_list('mechanism.joints', required=True)
         self.active_joints = r.string_list('mechanism.active_joints', required=True)
+        _check_sizes(self.links, self.joints, self.active_joints)
+        _check_names('mechanism.links', 'link', self.links)
+        _check_names('mechanism.joints', 'joint', self.joints)
         if not self.links:
             raise MechanismConfigError('mechanism.links', 'must name at least one moving link')
         if not self.joints:
@@ -79,25 +135,44 @@ class Mechanism:
             if name not in self.joints:
                 raise MechanismConfigError(
                     'mechanism.active_joints', f"'{name}' is not in mechanism.joints")
+        gravity_norm = math.hypot(*self.gravity)
+        if gravity_norm > MAX_GRAVITY:
+            raise MechanismConfigError(
+                'mechanism.gravity', f'must be at most {MAX_GRAVITY:g} m/s^2 long, got '
+                                     f'{list(self.gravity)} ({gravity_norm:.6g} m/s^2)')
         n, m = len(self.joints), len(self.active_joints)
-        self.initial_positions = r.vector('mechanism.initial_positions', n, default=(0.0,) * n)
+        self.initial_positions = _bounded(
+            'mechanism.initial_positions',
+            r.vector('mechanism.initial_positions', n, default=(0.0,) * n),
+            MAX_COORDINATE, 'rad or m')
         self.torque_weights = r.vector('mechanism.torque_weights', m, default=(1.0,) * m)
         for k, w in enumerate(self.torque_weights):
             if w <= 0.0:
                 raise MechanismConfigError(
                     'mechanism.torque_weights', f'must be positive, got {w!r} at index {k}')
+            if not MIN_TORQUE_WEIGHT <= w <= MAX_TORQUE_WEIGHT:
+                raise MechanismConfigError(
+                    'mechanism.torque_weights',
+                    f'must lie between {MIN_TORQUE_WEIGHT:g} and {MAX_TORQUE_WEIGHT:g}, got '
+                    f'{w!r} at index {k} (only their ratios matter: scale them)')
         self.setpoint_tolerance = self._positive(r, 'mechanism.setpoint_tolerance',
                                                  DEFAULT_SETPOINT_TOLERANCE)
         self.max_condition_number = self._positive(r, 'mechanism.max_condition_number',
-                                                   DEFAULT_MAX_CONDITION_NUMBER)
+                                                   DEFAULT_MAX_CONDITION_NUMBER,
+                                                   low=1.0, high=MAX_CONDITION_NUMBER_LIMIT)
         self.closure_tolerance = self._positive(r, 'mechanism.closure_tolerance',
-                                                DEFAULT_CLOSURE_TOLERANCE)
+                                                DEFAULT_CLOSURE_TOLERANCE,
+                                                high=MAX_CLOSURE_TOLERANCE)
 
     @staticmethod
-    def _positive(r, name, default):
+    def _positive(r, name, default, low=None, high=None):
         value = r.number(name, default=default)
         if value <= 0.0:
             raise MechanismConfigError(name, f'must be positive, got {value!r}')
+        if low is not None and value < low:
+            raise MechanismConfigError(name, f'must be at least {low:g}, got {value!r}')
+        if high is not None and value > high:
+            raise MechanismConfigError(name, f'must be at most {high:g}, got {value!r}')
         return value
 
     def _read_links(self, r):
@@ -107,8 +182,13 @@ class Mechanism:
             mass = r.number(prefix + 'mass', required=True)
             if mass < 0.0:
                 raise MechanismConfigError(prefix + 'mass', f'must be >= 0, got {mass!r}')
+            if mass > MAX_MASS:
+                raise MechanismConfigError(
+                    prefix + 'mass', f'must be at most {MAX_MASS:g} kg, got {mass!r}')
             self.link_mass.append(mass)
-            self.link_com.append(r.vector(prefix + 'com', 3, default=(0.0, 0.0, 0.0)))
+            self.link_com.append(_bounded(
+                prefix + 'com', r.vector(prefix + 'com', 3, default=(0.0, 0.0, 0.0)),
+                MAX_LENGTH, 'm'))
             self.link_inertia.append(_inertia(r, prefix + 'inertia'))
 
     def _read_joints(self, r):
@@ -133,17 +213,20 @@ class Mechanism:
             if ends[0] == ends[1]:
                 raise MechanismConfigError(prefix + 'child', 'must differ from the parent link')
             axis = r.vector(prefix + 'axis', 3, default=(0.0, 0.0, 1.0))
-            norm = math.sqrt(sum(a * a for a in axis))
+            norm = math.hypot(*axis)     # no overflow for entries near 1e308
             if norm < 1e-12:
                 raise MechanismConfigError(prefix + 'axis', f'must not be zero-length, got {list(axis)}')
             self.joint_types.append(kind)
+            offsets = {}
+            for key, bound, unit in (('parent_xyz', MAX_LENGTH, 'm'),
+                                     ('parent_rpy', MAX_COORDINATE, 'rad'),
+                                     ('child_xyz', MAX_LENGTH, 'm'),
+                                     ('child_rpy', MAX_COORDINATE, 'rad')):
+                offsets[key] = _bounded(prefix + key, r.vector(prefix + key, 3, default=(0.0, 0.0, 0.0)),
+                                        bound, unit)
             self.joint_specs.append(JointSpec(
                 name=joint, revolute=(kind == 'revolute'), parent=ends[0], child=ends[1],
-                parent_xyz=r.vector(prefix + 'parent_xyz', 3, default=(0.0, 0.0, 0.0)),
-                parent_rpy=r.vector(prefix + 'parent_rpy', 3, default=(0.0, 0.0, 0.0)),
-                child_xyz=r.vector(prefix + 'child_xyz', 3, default=(0.0, 0.0, 0.0)),
-                child_rpy=r.vector(prefix + 'child_rpy', 3, default=(0.0, 0.0, 0.0)),
-                axis=tuple(a / norm for a in axis)))
+                axis=tuple(a / norm for a in axis), **offsets))
 
     def _reject_unknown(self, r):
         for name in r.unused('mechanism.'):
@@ -163,19 +246,98 @@ class Mechanism:
 
     def _assemble(self):
         """Close the loops with the actuators held at their initial positions; failing that
-        (e.g. rounded redundant initial positions), let every joint move."""
-        held = [self.joints.index(name) for name in self.active_joints]
-        q, residual, ok = closure.assemble(self.model, self.initial_positions,
-                                           self.closure_tolerance, fixed=held)
+        (e.g. rounded redundant initial positions), let every joint move, but refuse a move
+        of an actuator by more than setpoint_tolerance. Far moves are reported."""
+        self.joint_index = {name: k for k, name in enumerate(self.joints)}
+        self.link_index = {name: k for k, name in enumerate(self.links)}
+        self.active_index = [self.joint_index[name] for name in self.active_joints]
+        start = self.initial_positions
+        q, residual, ok = closure.assemble(self.model, start, self.closure_tolerance,
+                                           fixed=self.active_index)
         if not ok:
-            q, residual, ok = closure.assemble(self.model, self.initial_positions,
-                                               self.closure_tolerance)
-        if not ok:
-            raise MechanismConfigError(
-                'mechanism.initial_positions',
-                f'the loops cannot be closed near these positions (closure residual '
-                f'{residual:.3g} after Newton iterations); check the geometry and the assembly mode')
+            held_q, held_residual = q, residual
+            q, residual, ok = closure.assemble(self.model, start, self.closure_tolerance)
+            if not ok:
+                raise MechanismConfigError(
+                    'mechanism.initial_positions',
+                    f'the loops cannot be closed near these positions, not even by moving '
+                    f'the actuators (closure residual {held_residual:.3g} with the actuators '
+                    f'held at initial_positions); {self._check_loops_hint(held_q)}')
+            moved = [(a, j) for a, j in enumerate(self.active_index)
+                     if abs(q[j] - start[j]) > self.setpoint_tolerance]
+            if moved:
+                what = '; '.join(f"active joint '{self.joints[j]}' from {start[j]:.6g} to "
+                                 f'{q[j]:.6g} (by {abs(q[j] - start[j]):.3g})' for _, j in moved)
+                self._moved_actuators = what
+                # raised after the degrees of freedom are counted: a rigid mechanism (whose
+                # actuators cannot be held anywhere but one pose) is the clearer message
+                self._deferred_error = MechanismConfigError(
+                    'mechanism.initial_positions',
+                    f'the loops cannot be closed with the actuators held at initial_positions '
+                    f'(closure residual {held_residual:.3g}); they close only by moving {what}, '
+                    f'more than mechanism.setpoint_tolerance ({self.setpoint_tolerance:g}); '
+                    f'{self._check_loops_hint(held_q)}')
+                self.assembled_positions = tuple(q)
+                return
+            for j in self.active_index:
+                if q[j] != start[j]:
+                    self._note(f"assembly moved active joint '{self.joints[j]}' from "
+                               f'{start[j]:.9g} to {q[j]:.9g} (by {abs(q[j] - start[j]):.3g}, '
+                               f'within mechanism.setpoint_tolerance) to close the loops: the '
+                               f'actuators\' initial_positions disagree slightly with the loop '
+                               f'closure')
         self.assembled_positions = tuple(q)
+        self._report_far_moves(start, q)
+
+    def _loops_of(self, q=None):
+        """(loop-closing joint, joints of its loop, residual at q or None) of every loop."""
+        residuals = [None] * len(self.model.loops)
+        if q is not None:
+            frames = kin.forward_kinematics(self.model, list(q), sp.ScalarOps)
+            states = closure.loop_closure(self.model, frames, list(q), sp.ScalarOps)
+            residuals = [max(map(abs, st.residual)) for st in states]
+        out = []
+        for lp, res in zip(self.model.loops, residuals):
+            joints = sorted({j for j, _ in lp.cycle} | {lp.joint})
+            out.append((lp.joint, [self.joints[j] for j in joints], res))
+        return out
+
+    def _check_loops_hint(self, q):
+        """What to check: the joints of the loops that stay open at q (all loops if none)."""
+        loops = self._loops_of(q)
+        bad = [lp for lp in loops if lp[2] is not None and lp[2] >= self.closure_tolerance] or loops
+        names = '; '.join(f"loop closed by '{self.joints[j]}' (joints {', '.join(js)}"
+                          + (f', residual {res:.3g})' if res is not None else ')')
+                          for j, js, res in bad[:5])
+        more = f' and {len(bad) - 5} more loops' if len(bad) > 5 else ''
+        return (f'check the geometry (parent_xyz, child_xyz, *_rpy and axis) of the joints of '
+                f'{names}{more}, and initial_positions (the assembly mode)')
+
+    def _report_far_moves(self, start, q):
+        """A note for every passive joint the assembly moved far from initial_positions."""
+        scale = max([math.hypot(*spec.parent_xyz) for spec in self.joint_specs]
+                    + [math.hypot(*spec.child_xyz) for spec in self.joint_specs] + [0.0])
+        scale = scale if scale > 0.0 else 1.0
+        held = set(self.active_index)
+        far = []
+        for j, (a, b) in enumerate(zip(start, q)):
+            if j in held:
+                continue
+            limit, unit = ((FAR_ANGLE, 'rad') if self.joint_specs[j].revolute
+                           else (FAR_FRACTION * scale, 'm'))
+            if abs(b - a) > limit:
+                far.append(f"'{self.joints[j]}' from {a:.6g} to {b:.6g} {unit}")
+        if far:
+            self._note(
+                f'closing the loops with the actuators held at initial_positions moved passive '
+                f'joint(s) {", ".join(far)} (more than {FAR_ANGLE:g} rad or {FAR_FRACTION:.0%} of '
+                f'the mechanism scale {scale:.3g} m): the geometry (xyz, rpy, axis) or '
+                f'initial_positions are probably not what was meant; '
+                f'{self._check_loops_hint(None)}')
+
+    def _note(self, text):
+        self.assembly_warnings.append(text)
+        warnings.warn(f'{self.name}: {text}', AssemblyWarning, stacklevel=4)
 
     def _count_degrees_of_freedom(self):
         n = len(self.joints)
@@ -184,40 +346,59 @@ class Mechanism:
         scale = max(1.0, singular_values[0]) if singular_values.size else 1.0
         self.closure_rank = int(np.sum(singular_values > RANK_TOLERANCE * scale))
         self.dof = n - self.closure_rank
-        self.joint_index = {name: k for k, name in enumerate(self.joints)}
-        self.link_index = {name: k for k, name in enumerate(self.links)}
-        self.active_index = [self.joint_index[name] for name in self.active_joints]
         m = len(self.active_joints)
+        if self.dof == 0:
+            raise MechanismConfigError(
+                'mechanism.joints',
+                f'the mechanism is rigid (locked) at the assembled initial positions: 0 degrees '
+                f'of freedom (closure rank {self.closure_rank} of {n} joint coordinates), so '
+                f'no joint can move and there is nothing to drive. Typical causes: a joint of '
+                f'the wrong type (prismatic where revolute was meant) or axis (in a planar '
+                f'loop every revolute axis is normal to the plane, every prismatic one in it), '
+                f'or a loop with too few joints; {self._check_loops_hint(None)}'
+                + (f' (the loops closed only after moving {self._moved_actuators} away from '
+                   f'initial_positions)' if self._moved_actuators else ''))
+        if self._deferred_error is not None:
+            raise self._deferred_error
         if m < self.dof:
             raise MechanismConfigError(
                 'mechanism.active_joints',
                 f'{m} active joint(s) for {self.dof} degrees of freedom (closure rank '
                 f'{self.closure_rank} of {n} joint coordinates at the assembled initial '
                 f'positions): the motion is not determined; add active joints')
-        self.primary = self._choose_primary()
+        self.primary = self._choose_primary(matrix)
         self.primary_joints = [self.active_index[i] for i in self.primary]
         fixed = set(self.primary_joints)
         self.free_joints = [j for j in range(n) if j not in fixed]
         self.inverse_torque_weights = [1.0 / w for w in self.torque_weights]
 
-    def _choose_primary(self):
+    def _choose_primary(self, matrix):
         """Indices (into active_joints) of ``dof`` actuators whose coordinates determine all
-        others best (smallest condition number); the rest of a redundant set are secondary."""
+        others best (smallest condition number); the rest of a redundant set are secondary.
+
+        ``matrix`` is the closure Jacobian at the assembled positions; the condition number
+        of its free columns is the Frobenius one the solver uses (lane_linalg), from their
+        singular values: ||A_f||_F ||A_f^+||_F."""
         best, best_cond = None, math.inf
+        n = len(self.joints)
         combos = itertools.combinations(range(len(self.active_index)), self.dof)
         for combo in itertools.islice(combos, 5000):
             fixed = {self.active_index[i] for i in combo}
-            free = [j for j in range(len(self.joints)) if j not in fixed]
-            sol = closure.evaluate(self.model, list(self.assembled_positions), free, sp.ScalarOps)
-            cond = sol.lsq.condition_number()
-            if cond < best_cond:
+            free = [j for j in range(n) if j not in fixed]
+            cond = _condition_number(matrix[:, free])
+            if cond < best_cond * (1.0 - 1e-9):    # ties: the first combination
                 best, best_cond = combo, cond
         if best is None or not best_cond <= self.max_condition_number:
+            hint = ''
+            if self.assembly_warnings:
+                hint = ('; the assembly also had to move joints far from initial_positions ('
+                        'see assembly_warnings): most likely the geometry (xyz, rpy, axis) or '
+                        'initial_positions are wrong rather than the choice of actuators')
             raise MechanismConfigError(
                 'mechanism.active_joints',
                 f'{self.active_joints} do not determine the motion at the assembled initial '
                 f'positions (closure Jacobian condition number {best_cond:.3g}): some passive '
-                f'joints could move with every actuator held')
+                f'joints could move with every actuator held{hint}')
         return list(best)
 
     @property
@@ -241,6 +422,10 @@ def _inertia(r, name):
     else:
         raise MechanismConfigError(
             name, f'must have 6 entries [ixx, iyy, izz, ixy, ixz, iyz], got {len(values)}')
+    largest = float(np.abs(matrix).max())
+    if largest > MAX_INERTIA:
+        raise MechanismConfigError(
+            name, f'entries must lie within +-{MAX_INERTIA:g} kg m^2, got {largest!r}')
     moments = np.linalg.eigvalsh(matrix)
     tol = 1e-9 * max(1e-12, np.abs(moments).max())
     if moments[0] < -tol:
@@ -251,3 +436,74 @@ def _inertia(r, name):
             name, f'violates the triangle inequality of principal moments '
                   f'({moments[0]:.6g} + {moments[1]:.6g} < {moments[2]:.6g})')
     return tuple(float(x) for x in matrix.ravel())
+
+
+def _condition_number(a):
+    """||A||_F ||A^+||_F of a matrix with at least as many rows as columns (inf if the
+    columns are dependent); 1.0 for no columns, like QRLeastSquares.condition_number."""
+    rows, cols = a.shape
+    if cols == 0:
+        return 1.0
+    if rows < cols:
+        return math.inf
+    s = np.linalg.svd(a, compute_uv=False)
+    if not s[-1] > 0.0:
+        return math.inf
+    return float(math.sqrt(float(np.sum(s * s))) * math.sqrt(float(np.sum(1.0 / (s * s)))))
+
+
+def _bounded(name, values, bound, unit):
+    """values unchanged, or MechanismConfigError if an entry exceeds +-bound."""
+    for k, x in enumerate(values):
+        if abs(x) > bound:
+            raise MechanismConfigError(
+                name, f'entries must lie within +-{bound:g} {unit}, got {x!r} at index {k}')
+    return values
+
+
+def _check_sizes(links, joints, active):
+    """The documented size limits, before anything whose cost grows faster than the file."""
+    loops = len(joints) - len(links)
+    for name, count, limit, what in (
+            ('mechanism.joints', len(joints), MAX_JOINTS, 'joints'),
+            ('mechanism.links', len(links), MAX_LINKS, 'links'),
+            ('mechanism.active_joints', len(active), MAX_ACTIVE_JOINTS, 'active joints')):
+        if count > limit:
+            raise MechanismConfigError(
+                name, f'{count} {what}, more than the supported {limit} (docs/mechanism.md, '
+                      f'size limits)')
+    if loops > MAX_LOOPS:
+        raise MechanismConfigError(
+            'mechanism.joints',
+            f'{len(joints)} joints on {len(links)} moving links make {loops} closed loops, more '
+            f'than the supported {MAX_LOOPS} (docs/mechanism.md, size limits)')
+    columns = len(links) * len(active)
+    if columns > MAX_JACOBIAN_COLUMNS:
+        raise MechanismConfigError(
+            'mechanism.active_joints',
+            f'{len(links)} links x {len(active)} active joints = {columns} COG Jacobian '
+            f'columns, more than the supported {MAX_JACOBIAN_COLUMNS} (docs/mechanism.md, '
+            f'size limits)')
+
+
+def _check_names(parameter, kind, names):
+    """Names of links and joints are parts of ROS 2 parameter names: letters, digits, '_'."""
+    for name in names:
+        if NAME_PATTERN.match(name):
+            continue
+        fixed = re.sub(r'[^A-Za-z0-9_]', '_', name)
+        if fixed[:1].isdigit():
+            fixed = f'{kind}_{fixed}'
+        if '.' in name:
+            why = (f"contains '.', which ROS 2 reads as a separator of parameter names "
+                   f"('{parameter.split('.')[1]}.{name}.*' is ambiguous)")
+        elif name[:1].isdigit():
+            why = 'starts with a digit, which a ROS 2 parameter name component must not'
+        else:
+            bad = sorted({c for c in name if not (c.isascii() and (c.isalnum() or c == '_'))})
+            why = f"contains {', '.join(repr(c) for c in bad)}"
+        raise MechanismConfigError(
+            parameter,
+            f"{kind} name '{name}' {why}; names of links and joints become parts of ROS 2 "
+            f"parameter names ({parameter.split('.')[1]}.<name>.*) and may hold only letters, "
+            f"digits and '_', not starting with a digit: use '_' instead, e.g. '{fixed}'")
