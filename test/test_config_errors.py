@@ -263,3 +263,170 @@ def test_from_parameters_raises_only_config_errors(case):
         cog_id_ros.Mechanism.from_parameters(params)
     assert str(info.value).startswith(info.value.parameter + ': ')
     assert len(str(info.value)) < 1000
+
+
+# --- Reliability item 2: a rigid (0 DOF) mechanism is refused at load ---------------------
+
+def test_a_rigid_mechanism_is_refused_at_load():
+    """Reliability item 2: paper four-bar (a) with joint2 made prismatic has 0 degrees of
+    freedom; it must not load (its first trajectory used to crash in numpy)."""
+    params = with_changes(from_yaml(PAPER_A), joints__joint2__type='prismatic')
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert info.value.parameter == 'mechanism.joints'
+    message = str(info.value)
+    assert 'rigid' in message and '0 degrees of freedom' in message
+    assert 'prismatic where revolute was meant' in message
+
+
+# --- Reliability item 5 (load part): documented bounds on every value -----------------------
+
+BOUNDS = [
+    # (parameter, value just beyond the documented bound, bound as printed)
+    ('links.link1.mass', 1e300, '1e+09'),
+    ('links.link1.mass', 2e9, '1e+09'),
+    ('links.link2.com', [1e308, 0.0, 0.0], '1e+06'),
+    ('links.link3.inertia', [1e13, 1e13, 1e13, 0, 0, 0], '1e+12'),
+    ('joints.joint2.parent_xyz', [2e6, 0.0, 0.0], '1e+06'),
+    ('joints.joint4.child_xyz', [0.0, -1e300, 0.0], '1e+06'),
+    ('joints.joint2.parent_rpy', [0.0, 0.0, 1e300], '1e+06'),
+    ('mechanism.gravity', [0.0, -1e300, 0.0], '10000'),
+    ('mechanism.gravity', [8000.0, -8000.0, 0.0], '10000'),
+    ('mechanism.initial_positions', [1.5707963267948966, -1.5707963267948966, 1e300, 1.5707963267948966], '1e+06'),
+    ('mechanism.closure_tolerance', 1e300, '0.001'),
+    ('mechanism.max_condition_number', 1e300, '1e+15'),
+    ('mechanism.max_condition_number', 0.5, '1'),
+]
+
+
+@pytest.mark.parametrize('parameter,value,bound', BOUNDS, ids=[f'{p}={v}' for p, v, _ in BOUNDS])
+def test_values_beyond_the_documented_bounds_are_refused(parameter, value, bound):
+    """Reliability item 5: masses, lengths, inertias, gravity, angles and tolerances near
+    1e308 (that made every torque infinite) are refused at load, naming the bound."""
+    params = with_changes(from_yaml(PAPER_A), **{parameter.replace('.', '__'): value})
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert info.value.parameter == parameter
+    assert bound in str(info.value)
+
+
+def test_a_huge_axis_is_normalised_not_zeroed():
+    """Reliability item 5: an axis of entries near 1e308 overflowed its norm to inf and
+    became a zero axis silently; it is the same axis as [0, 0, 1]."""
+    big = with_changes(from_yaml(PAPER_A), joints__joint2__axis=[0.0, 0.0, 1e308])
+    mech = cog_id_ros.Mechanism.from_parameters(big)
+    assert mech.joint_specs[1].axis == (0.0, 0.0, 1.0)
+
+
+def test_the_largest_values_within_the_bounds_give_finite_torques():
+    """Reliability item 5: a mechanism at the documented bounds (masses 1e9 kg, inertia 1e12,
+    |gravity| 1e4) driven by a moderate setpoint gives finite torques."""
+    import numpy as np
+    params = with_changes(from_yaml(PAPER_A), mechanism__gravity=[0.0, -1e4, 0.0])
+    for link in ('link1', 'link2', 'link3'):
+        params[f'links.{link}.mass'] = 1e9
+        params[f'links.{link}.inertia'] = [1e12, 1e12, 1e12, 0, 0, 0]
+    solver = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(params))
+    tau = solver.torques(np.array([[1.6]]), np.array([[100.0]]), np.array([[1e4]]))
+    assert np.all(np.isfinite(tau))
+    # and just beyond them the file is refused
+    params['links.link1.mass'] = 1.01e9
+    with pytest.raises(cog_id_ros.MechanismConfigError, match='links.link1.mass'):
+        cog_id_ros.Mechanism.from_parameters(params)
+
+
+# --- Reliability item 21: names of links and joints are ROS 2 parameter name parts ---------
+
+def _renamed(params, old, new):
+    def fix(v):
+        if isinstance(v, str):
+            return new if v == old else v
+        if isinstance(v, list):
+            return [fix(x) for x in v]
+        return v
+    return {k.replace(f'.{old}.', f'.{new}.'): fix(v) for k, v in params.items()}
+
+
+BAD_NAMES = [
+    ('mechanism.links', 'link1', 'link.one', "contains '.'", 'link_one'),
+    ('mechanism.joints', 'joint2', 'joint.2', "contains '.'", 'joint_2'),
+    ('mechanism.links', 'link2', 'link-2', "'-'", 'link_2'),
+    ('mechanism.joints', 'joint3', 'joint 3', "' '", 'joint_3'),
+    ('mechanism.links', 'link3', '3rd', 'starts with a digit', 'link_3rd'),
+    ('mechanism.joints', 'joint4', 'gelenk\u00e4', "'\u00e4'", 'gelenk_'),
+]
+
+
+@pytest.mark.parametrize('parameter,old,new,why,suggestion', BAD_NAMES,
+                         ids=[b[2] for b in BAD_NAMES])
+def test_names_that_cannot_be_ros_parameter_components_are_refused(parameter, old, new, why,
+                                                                   suggestion):
+    """Reliability item 21: a link named 'link.one' loaded in the API while the node refused
+    the same file; names must hold only letters, digits and '_' (no leading digit), and the
+    message says to use '_' instead."""
+    params = _renamed(from_yaml(PAPER_A), old, new)
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert info.value.parameter == parameter
+    message = str(info.value)
+    assert repr(new) in message and why in message
+    assert "use '_' instead" in message and suggestion in message
+
+
+# --- Reliability item 24: what assembly had to change is said at load -------------------------
+
+def test_a_missing_child_xyz_is_reported_with_the_joints_that_moved():
+    """Reliability item 24: without joint4's child_xyz the loop only closes far from
+    initial_positions; the load says so (assembly_warnings and an AssemblyWarning), with
+    both values and the loop's joints to check."""
+    from cog_id_ros.core.mechanism import AssemblyWarning
+    params = with_changes(from_yaml(PAPER_A), joints__joint4__child_xyz=None)
+    with pytest.warns(AssemblyWarning) as record:
+        mech = cog_id_ros.Mechanism.from_parameters(params)
+    assert len(mech.assembly_warnings) == 1
+    note = mech.assembly_warnings[0]
+    assert note in str(record[0].message)
+    assert "'joint1' from 1.5708 to 1.0472" in note
+    assert 'joints joint1, joint2, joint3, joint4' in note and 'geometry' in note
+    # the well-formed file assembles where it is told to, without a note
+    assert cog_id_ros.Mechanism.from_parameters(from_yaml(PAPER_A)).assembly_warnings == []
+
+
+def test_an_actuator_the_assembly_had_to_move_is_refused():
+    """Reliability item 24: the README says actuators are held at initial_positions; an
+    actuator moved by more than setpoint_tolerance to close the loops is a
+    MechanismConfigError on mechanism.initial_positions with both values and the loop."""
+    from mechanisms import four_bar
+    params = four_bar(ground=0.6, crank=0.2, coupler=0.6, rocker=0.4, active=('joint4',),
+                      init=[1.0, -0.5, 2.0, 0.5])
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert info.value.parameter == 'mechanism.initial_positions'
+    message = str(info.value)
+    assert "active joint 'joint4' from 0.5 to 0.98" in message
+    assert 'closure residual' in message and 'joints joint1, joint2, joint3, joint4' in message
+
+
+def test_a_slightly_moved_redundant_actuator_is_noted():
+    """Reliability item 24: rounded redundant initial positions still load, but the move of
+    the actuators (within setpoint_tolerance) is noted with both values."""
+    from cog_id_ros.core.mechanism import AssemblyWarning
+    rounded = with_changes(from_yaml('config/paper_four_bar_b.yaml'),
+                           mechanism__initial_positions=[1.5708, -1.5708, 1.5707, 1.5708])
+    with pytest.warns(AssemblyWarning, match='within mechanism.setpoint_tolerance'):
+        mech = cog_id_ros.Mechanism.from_parameters(rounded)
+    assert any("from 1.5707 to" in note for note in mech.assembly_warnings)
+
+
+def test_the_example_mechanisms_load_without_assembly_notes():
+    """Reliability item 24 and 21: every config/*.yaml keeps valid names and assembles where
+    its initial_positions say, without a note (guards the thresholds of the notes)."""
+    import glob
+    import warnings
+    from cog_id_ros.core.mechanism import AssemblyWarning
+    files = sorted(glob.glob('config/*.yaml'))
+    assert len(files) >= 6
+    with warnings.catch_warnings():
+        warnings.simplefilter('error', AssemblyWarning)
+        for path in files:
+            assert cog_id_ros.Mechanism.from_params_file(path).assembly_warnings == []
