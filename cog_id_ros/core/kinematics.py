@@ -8,6 +8,7 @@ either direction: the edge remembers a sign so that the joint coordinate keeps i
 Every joint coordinate, tree or loop-closing, is a coordinate of the model; the loop-closing
 ones are tied to the others by the closure equations (closure.py).
 """
+from collections import deque
 from dataclasses import dataclass, field
 
 from . import spatial as sp
@@ -84,40 +85,71 @@ class KinematicModel:
         self._build_tree()
 
     def _build_tree(self):
-        reached = {BASE}
-        queue = [BASE]
-        in_tree = set()
-        path = {BASE: []}
+        """Breadth-first from the base over the joints incident to each link, in the listed
+        order; then each loop-closing joint's cycle from the tree paths of its two links.
+
+        Linear in the number of joints plus the total length of the loop cycles: every link
+        keeps only its tree edge (no copied paths), and a cycle is found by walking up from
+        both links to their nearest common ancestor.
+        """
+        incident = {}
+        for j, spec in enumerate(self.joints):
+            incident.setdefault(spec.parent, []).append(j)
+            incident.setdefault(spec.child, []).append(j)
+        in_tree = [False] * self.n_joints
+        up = {BASE: None}       # link -> (tree joint, tree parent link)
+        depth = {BASE: 0}
+        queue = deque([BASE])
         while queue:
-            link = queue.pop(0)
-            for j, spec in enumerate(self.joints):
-                if j in in_tree or link not in (spec.parent, spec.child):
+            link = queue.popleft()
+            for j in incident.get(link, ()):
+                if in_tree[j]:
                     continue
+                spec = self.joints[j]
                 other = spec.child if spec.parent == link else spec.parent
-                if other in reached:
+                if other in up:
                     continue
                 edge = _tree_edge(j, spec, link, other)
                 self.edge_of_link[other] = len(self.edges)
                 self.edges.append(edge)
-                in_tree.add(j)
-                reached.add(other)
-                path[other] = path[link] + [(j, edge.sign)]
+                in_tree[j] = True
+                up[other] = (j, link)
+                depth[other] = depth[link] + 1
                 queue.append(other)
-        missing = [self.link_names[k] for k in range(self.n_links) if k not in reached]
+        missing = [self.link_names[k] for k in range(self.n_links) if k not in up]
         if missing:
             raise MechanismConfigError(
                 'mechanism.links',
                 f"link '{missing[0]}' is not connected to the base link by any chain of joints")
         for j, spec in enumerate(self.joints):
-            if j not in in_tree:
+            if not in_tree[j]:
                 loop = _loop_joint(j, spec)
-                on_child = dict(path[spec.child])
-                on_parent = dict(path[spec.parent])
-                loop.cycle = [(i, 1.0) for i in on_child if i not in on_parent] + \
-                             [(i, -1.0) for i in on_parent if i not in on_child]
+                on_child, on_parent = _paths_below_common_ancestor(up, depth, spec.child,
+                                                                   spec.parent)
+                loop.cycle = [(i, 1.0) for i in on_child] + [(i, -1.0) for i in on_parent]
                 self.loops.append(loop)
         self.tree_joints = [e.joint for e in self.edges]
         self.loop_joints = [lp.joint for lp in self.loops]
+
+
+def _paths_below_common_ancestor(up, depth, a, b):
+    """Tree joints from the nearest common ancestor of links a and b down to a, and down to
+    b (each in order from the ancestor outwards, as the tree paths from the base list them)."""
+    path_a, path_b = [], []
+    while depth[a] > depth[b]:
+        j, a = up[a]
+        path_a.append(j)
+    while depth[b] > depth[a]:
+        j, b = up[b]
+        path_b.append(j)
+    while a != b:
+        j, a = up[a]
+        path_a.append(j)
+        j, b = up[b]
+        path_b.append(j)
+    path_a.reverse()
+    path_b.reverse()
+    return path_a, path_b
 
 
 def _tree_edge(j, spec, tree_parent, tree_child):
