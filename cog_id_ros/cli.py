@@ -420,8 +420,18 @@ def _position_columns(active):
     return ', '.join(f"'{trajectory_io.joint_column(j, 'position')}'" for j in active)
 
 
-def _invalid_message(path, row, active, exc):
-    return (f'{path}: row {row} (line {row + 1} of the file), column(s) {_position_columns(active)}: '
+def _invalid_message(path, row, active, exc, values=None):
+    """One line for a row the core refused. ``values``: the row's (q, qd, qdd) of the
+    active joints; for a value out of range the column holding the largest magnitude is
+    named, for the other reasons the positions (the pose is what is wrong)."""
+    columns = _position_columns(active)
+    if values is not None and getattr(exc, 'reason', None) in ('out_of_range', 'non_finite'):
+        with np.errstate(all='ignore'):
+            mags = np.abs(np.asarray(values, dtype=float))     # (3, M)
+            mags[np.isnan(mags)] = np.inf
+        field, k = np.unravel_index(int(np.argmax(mags)), mags.shape)
+        columns = f"'{trajectory_io.joint_column(active[k], trajectory_io.FIELDS[field])}'"
+    return (f'{path}: row {row} (line {row + 1} of the file), column(s) {columns}: '
             f'{_core_reason(exc)}')
 
 
@@ -507,7 +517,8 @@ def solve(solver, q, qd, qdd, chunk, skip_invalid, progress, path, rows=None):
                 raise ToolError(
                     f'{path}: rows {first}..{last} (lines {first + 1}..{last + 1} of the '
                     f'file): {_core_reason(exc)}', EXIT_INPUT) from None
-            raise ToolError(_invalid_message(path, int(idx[int(sample)]) + 1, active, exc),
+            r = int(idx[int(sample)])
+            raise ToolError(_invalid_message(path, r + 1, active, exc, (q[r], qd[r], qdd[r])),
                             EXIT_INPUT) from None
         efforts[idx] = torques
         valid[idx] = ok
@@ -632,12 +643,14 @@ def finite_for_json(summary):
 
     def walk(value, where):
         if isinstance(value, float) and not math.isfinite(value):
-            notes.append(f'{where}: {value!r} is beyond the range of a double; written as null')
+            notes.append(f'{where}: beyond the range of a double ({value!r}): null in --json, '
+                         'n/a in the table')
             return None
         if isinstance(value, dict):
             return {k: walk(v, f'{where}.{k}' if where else k) for k, v in value.items()}
         if isinstance(value, list):
-            return [walk(v, f'{where}[{i}]') for i, v in enumerate(value)]
+            return [walk(v, f"{where}[{v['joint']}]" if isinstance(v, dict) and 'joint' in v
+                         else f'{where}[{i}]') for i, v in enumerate(value)]
         return value
 
     clean = walk({k: v for k, v in summary.items() if k != 'notes'}, '')

@@ -199,7 +199,10 @@ def _quoted(text, quote=True):
 
 
 def _cells(line):
-    return next(csv.reader([line], skipinitialspace=True), [])
+    try:
+        return next(csv.reader([line], skipinitialspace=True), [])
+    except csv.Error:       # a cell over the csv module's field limit (131,072 characters)
+        return line.split(',')
 
 
 def _check_cell_counts(path, lines, n_columns):

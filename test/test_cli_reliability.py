@@ -1,0 +1,380 @@
+"""cog_id_torques against the reliability issue: wrapped angles and jumps, special output
+files, stop signals, values beyond a double, unusable time steps, write errors naming the
+user's path, huge positions, and inputs that must never end in a traceback.
+
+Every test runs the console script as a subprocess (helpers from test_cli).
+"""
+import json
+import math
+import os
+import resource
+import signal
+import stat
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+from cog_id_ros import trajectory_io as tio
+from test_cli import CONFIG, PARAMS_A, TARGET, core_torques, error_lines, run_tool, target, \
+    tool_command, write_csv
+
+SLIDER_CRANK = CONFIG / 'slider_crank.yaml'
+
+
+def crank_motion(t):
+    """The slider-crank's test motion (config/slider_crank.yaml): 1.6 turns, through +-pi."""
+    w = math.pi
+    return (0.3 + 5.0 * t + 0.4 * np.sin(w * t), 5.0 + 0.4 * w * np.cos(w * t),
+            -0.4 * w * w * np.sin(w * t))
+
+
+def wrap(theta):
+    return np.arctan2(np.sin(theta), np.cos(theta))
+
+
+def strict_json(text):
+    def refuse(name):
+        raise ValueError(f'not JSON: {name}')
+    return json.loads(text, parse_constant=refuse)
+
+
+# --- item 11: wrapped angles and jumps -----------------------------------------------------------
+
+def test_unwrap_gives_the_torques_of_the_unwrapped_motion(tmp_path):
+    """Reliability item 11: --unwrap takes each revolute position as the 2 pi equivalent
+    nearest the previous row's, and says how many rows it shifted."""
+    t = np.arange(2001) * 1e-3
+    theta = crank_motion(t)[0]
+    write_csv(tmp_path / 'true.csv', {'time': t, 'crank_joint.position': theta})
+    write_csv(tmp_path / 'wrapped.csv', {'time': t, 'crank_joint.position': wrap(theta)})
+    ref = run_tool('--params-file', SLIDER_CRANK, '--input', 'true.csv', '--output', 'ref.csv',
+                   cwd=tmp_path)
+    assert ref.returncode == 0, ref.stderr
+    proc = run_tool('--params-file', SLIDER_CRANK, '--input', 'wrapped.csv', '--output',
+                    'tau.csv', '--unwrap', '--json', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    s = strict_json(proc.stdout)
+    shifted = int(np.count_nonzero(np.abs(wrap(theta) - theta) > 1.0))
+    wraps = int(np.count_nonzero(np.abs(np.diff(wrap(theta))) > math.pi))
+    assert shifted > 100 and wraps >= 1
+    assert s['unwrap'] is True
+    assert s['unwrapped'] == {'crank_joint.position': {'rows': shifted, 'wraps': wraps}}
+    assert f'{shifted:,} row(s) shifted' in proc.stderr
+    _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
+    _, _, expected = tio.read_efforts(tmp_path / 'ref.csv')
+    np.testing.assert_allclose(tau, expected, rtol=0, atol=1e-6 * np.max(np.abs(expected)))
+
+
+def test_a_wrapped_angle_without_unwrap_is_a_bad_row(tmp_path):
+    """Reliability item 11: the 2 pi jump of a wrapped encoder stops the run (exit 1) with
+    the row and the column, instead of 400,000 N m torques."""
+    t = np.arange(2001) * 1e-3
+    theta = crank_motion(t)[0]
+    write_csv(tmp_path / 'wrapped.csv', {'time': t, 'crank_joint.position': wrap(theta)})
+    proc = run_tool('--params-file', SLIDER_CRANK, '--input', 'wrapped.csv', '--output',
+                    'tau.csv', cwd=tmp_path)
+    assert proc.returncode == 1
+    [line] = error_lines(proc)
+    row = int(np.argmax(theta > math.pi)) + 1         # the first row past +pi
+    assert f"row {row} (line {row + 1} of the file), column 'crank_joint.position': jumps by" in line
+    assert '--max-step' in line and '--unwrap' in line
+    assert sorted(os.listdir(tmp_path)) == ['wrapped.csv']
+
+
+def test_skip_invalid_skips_a_jump_with_reason_jump(tmp_path):
+    """Reliability item 11: with --skip-invalid a jump is a skipped row (reason 'jump'); the
+    next row is compared with the last row that was not a jump."""
+    t = np.arange(200) * 1e-3
+    theta, dtheta, ddtheta = target(t)
+    glitch = theta.copy()
+    glitch[57] += 1.0                                   # row 58: one wild encoder reading
+    src = write_csv(tmp_path / 'traj.csv', {'time': t, 'joint3.position': glitch,
+                                            'joint3.velocity': dtheta,
+                                            'joint3.acceleration': ddtheta})
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv',
+                    '--skip-invalid', '--json', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    s = strict_json(proc.stdout)
+    assert s['skipped_rows'] == [58] and s['skipped_reasons'] == {'jump': 1}
+    assert s['skipped_row_reasons'] == ['jump'] and s['solved'] == 199
+    assert "row 58 (line 59 of the file): column 'joint3.position': jumps by 1.0" in proc.stderr
+    assert 'from row 57 (limit 0.5 rad per row, --max-step)' in proc.stderr
+    _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
+    assert np.isnan(tau[57, 0])
+    keep = np.arange(200) != 57
+    clean = write_csv(tmp_path / 'clean.csv', {'time': t[keep], 'joint3.position': theta[keep],
+                                               'joint3.velocity': dtheta[keep],
+                                               'joint3.acceleration': ddtheta[keep]})
+    _, _, _, ref = core_torques(PARAMS_A, clean)
+    np.testing.assert_allclose(tau[keep], ref, rtol=0, atol=1e-9)
+
+
+def test_max_step_option_sets_the_limit(tmp_path):
+    """Reliability item 11: --max-step RAD per row (inf: no limit) is the threshold."""
+    t = np.arange(6) * 0.1
+    q = np.array([1.5, 1.5, 1.8, 1.8, 1.8, 1.8])        # one step of 0.3 rad
+    src = write_csv(tmp_path / 'traj.csv', {'time': t, 'joint3.position': q,
+                                            'joint3.velocity': np.zeros(6),
+                                            'joint3.acceleration': np.zeros(6)})
+    tight = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv',
+                     '--max-step', '0.2', cwd=tmp_path)
+    assert tight.returncode == 1
+    [line] = error_lines(tight)
+    assert "row 3 (line 4 of the file), column 'joint3.position': jumps by 0.3 rad" in line
+    assert 'limit 0.2 rad per row' in line
+    for limit in ('0.5', 'inf'):
+        ok = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv',
+                      '--max-step', limit, cwd=tmp_path)
+        assert ok.returncode == 0, ok.stderr
+    bad = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv',
+                   '--max-step', '-1', cwd=tmp_path)
+    assert bad.returncode == 2 and '--max-step' in bad.stderr and 'Traceback' not in bad.stderr
+
+
+# --- item 16: special output files ---------------------------------------------------------------
+
+@pytest.mark.parametrize('option, name', [('--output', 'tau.csv'), ('--plot', 'tau.png')])
+def test_a_symlinked_output_is_written_through(tmp_path, option, name):
+    """Reliability item 16: a symlink is written through (its target replaced atomically),
+    the link stays a link."""
+    (tmp_path / 'data').mkdir()
+    real = tmp_path / 'data' / name
+    real.write_text('old')
+    os.symlink(os.path.join('data', name), tmp_path / name)
+    args = ['--output', 'tau.csv', '--plot', 'tau.png'] if option == '--plot' else \
+        ['--output', 'tau.csv']
+    proc = run_tool('--params-file', PARAMS_A, '--input', TARGET, *args, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert os.path.islink(tmp_path / name)
+    assert real.read_bytes() != b'old' and real.stat().st_size > 1000
+    assert sorted(os.listdir(tmp_path / 'data')) == [name]      # no temporary left
+
+
+@pytest.mark.parametrize('option, name', [('--output', 'tau.csv'), ('--plot', 'tau.png')])
+def test_a_fifo_output_is_refused(tmp_path, option, name):
+    """Reliability item 16: a FIFO is never replaced by a regular file: exit 2, one line."""
+    os.mkfifo(tmp_path / name)
+    args = ['--output', 'tau.csv', '--plot', 'tau.png'] if option == '--plot' else \
+        ['--output', 'tau.csv']
+    proc = run_tool('--params-file', PARAMS_A, '--input', TARGET, *args, cwd=tmp_path)
+    assert proc.returncode == 2
+    [line] = error_lines(proc)
+    assert f'{option} {name}: is a FIFO' in line
+    assert stat.S_ISFIFO(os.lstat(tmp_path / name).st_mode)
+    assert os.listdir(tmp_path) == [name]
+
+
+def test_a_symlink_to_a_fifo_is_refused(tmp_path):
+    """Reliability item 16: the check follows the link; neither the link nor the FIFO changes."""
+    os.mkfifo(tmp_path / 'pipe')
+    os.symlink('pipe', tmp_path / 'tau.csv')
+    proc = run_tool('--params-file', PARAMS_A, '--input', TARGET, '--output', 'tau.csv',
+                    cwd=tmp_path)
+    assert proc.returncode == 2
+    [line] = error_lines(proc)
+    assert '--output tau.csv: is a FIFO' in line
+    assert os.path.islink(tmp_path / 'tau.csv') and stat.S_ISFIFO(os.stat(tmp_path / 'pipe').st_mode)
+
+
+# --- item 17: SIGTERM and SIGHUP during the write ------------------------------------------------
+
+@pytest.mark.parametrize('signame', ['SIGTERM', 'SIGHUP'])
+def test_a_stop_signal_during_the_write_leaves_no_temporary_file(tmp_path, signame):
+    """Reliability item 17: SIGTERM (or SIGHUP) while the outputs are written: the temporary
+    files are removed, exit 128 + signum, one line on stderr."""
+    n = 200_000
+    t = np.arange(n) * 1e-3
+    theta, dtheta, ddtheta = target(t)
+    src = write_csv(tmp_path / 'long.csv', {'time': t, 'joint3.position': theta,
+                                            'joint3.velocity': dtheta,
+                                            'joint3.acceleration': ddtheta})
+    proc = subprocess.Popen(tool_command() + ['--params-file', str(PARAMS_A), '--input', str(src),
+                                              '--output', 'tau.csv', '--plot', 'tau.png'],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    deadline = time.monotonic() + 240
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            if any(name.endswith('.tmp') for name in os.listdir(tmp_path)):
+                break
+            time.sleep(0.002)
+        assert proc.poll() is None, 'the run ended before its temporary file appeared'
+        proc.send_signal(getattr(signal, signame))
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    signum = getattr(signal, signame)
+    assert proc.returncode == 128 + signum, err
+    assert 'Traceback' not in err
+    assert err.strip().splitlines()[-1] == \
+        f'cog_id_torques: interrupted by {signame}; no output written'
+    assert sorted(os.listdir(tmp_path)) == ['long.csv']
+    assert out == ''
+
+
+# --- item 18: values beyond a double in the summary and the JSON ---------------------------------
+
+def _huge_efforts(tmp_path):
+    # accelerations of 4e299 rad/s^2 give efforts near 1.7e299 N m (finite); a velocity of
+    # 1e20 rad/s makes their power (1.7e319 W) beyond a double
+    return write_csv(tmp_path / 'huge.csv', {
+        'time': [0.0, 0.1, 0.2], 'joint3.position': [1.0, 1.0, 1.0],
+        'joint3.velocity': [1e20, 0.0, 0.0], 'joint3.acceleration': [4e299, 1e299, 0.0]})
+
+
+def test_rms_of_huge_efforts_is_finite_and_the_json_is_json(tmp_path):
+    """Reliability item 18: RMS scaled by the peak (no overflow); --json never writes
+    Infinity or NaN: a value beyond a double is null, with a note."""
+    src = _huge_efforts(tmp_path)
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv', '--json',
+                    cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert 'Warning' not in proc.stderr
+    s = strict_json(proc.stdout)
+    [j] = s['joints']
+    _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
+    e = tau[:, 0]
+    peak = np.max(np.abs(e))
+    assert peak > 1e299 and j['peak_effort'] == peak
+    assert j['rms_effort'] == pytest.approx(peak * np.sqrt(np.mean((e / peak) ** 2)), rel=1e-12)
+    assert j['peak_power'] is None and j['peak_power_row'] == 1
+    assert any('peak_power' in note and 'beyond the range of a double' in note
+               for note in s['notes'])
+
+
+def test_text_summary_of_huge_efforts_has_no_inf(tmp_path):
+    """Reliability item 18: the table says n/a for a value beyond a double, never inf."""
+    src = _huge_efforts(tmp_path)
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    row = [line for line in proc.stdout.splitlines() if line.startswith('joint3')][0]
+    assert 'inf' not in row and 'n/a' in row and 'e+299 N m' in row
+    assert 'Warning' not in proc.stderr
+
+
+# --- item 20: unusable time steps ----------------------------------------------------------------
+
+@pytest.mark.parametrize('times, words', [
+    ([0.0, 1e-300, 2e-300, 3e-300, 4e-300, 5e-300], 'too small'),
+    ([0.0, 1e300, 2e300, 3e300, 4e300, 5e300], 'too large'),
+])
+def test_time_steps_too_small_or_too_large_to_estimate(tmp_path, times, words):
+    """Reliability item 20: one line naming row 2 and column 'time' and the usable range;
+    no RuntimeWarning, no 'qd is nan'."""
+    src = write_csv(tmp_path / 'traj.csv', {'time': times, 'joint3.position': np.full(6, 1.5)})
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv', cwd=tmp_path)
+    assert proc.returncode == 1
+    assert 'Warning' not in proc.stderr and 'nan' not in proc.stderr
+    [line] = error_lines(proc)
+    assert "row 2 (line 3 of the file), column 'time'" in line and words in line
+    assert f'{tio.MIN_ESTIMATE_STEP:g} .. {tio.MAX_ESTIMATE_STEP:g} s' in line
+    assert sorted(os.listdir(tmp_path)) == ['traj.csv']
+
+
+# --- item 23: write errors name the user's path --------------------------------------------------
+
+def _limit_file_size(limit):
+    def apply():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)     # EFBIG instead of a kill
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return apply
+
+
+@pytest.mark.parametrize('option, path, limit', [('--output', 'tau.csv', 100),
+                                                 ('--plot', 'tau.png', 5000)])
+def test_a_write_error_names_the_users_path(tmp_path, option, path, limit):
+    """Reliability item 23: the message names --output or --plot as given, never the
+    temporary file; exit 4 and nothing left behind. (Files are limited to `limit` bytes:
+    20 rows of efforts take ~800, the plot far more.)"""
+    t = np.arange(20) * 0.01
+    theta, dtheta, ddtheta = target(t)
+    (tmp_path / 'in').mkdir()
+    src = write_csv(tmp_path / 'in' / 'traj.csv', {'time': t, 'joint3.position': theta,
+                                                   'joint3.velocity': dtheta,
+                                                   'joint3.acceleration': ddtheta})
+    (tmp_path / 'out').mkdir()
+    proc = subprocess.run(tool_command() + ['--params-file', str(PARAMS_A), '--input', str(src),
+                                            '--output', 'tau.csv', '--plot', 'tau.png'],
+                          cwd=tmp_path / 'out', text=True, capture_output=True, timeout=300,
+                          preexec_fn=_limit_file_size(limit))
+    assert proc.returncode == 4, proc.stderr
+    [line] = error_lines(proc)
+    assert f'{option} {path}: cannot write: File too large' in line
+    assert '.tmp' not in line
+    assert os.listdir(tmp_path / 'out') == []
+
+
+# --- item 6: huge positions ----------------------------------------------------------------------
+
+@pytest.mark.parametrize('value', [1e6, 1e12, 1e300])
+def test_huge_positions_end_quickly_without_a_traceback(tmp_path, value):
+    """Reliability item 6: a CSV at 1e6, 1e12 or 1e300 rad finishes within seconds with
+    exit 0 or 1 (one line naming row 1 and a column), never a hang or a traceback."""
+    src = write_csv(tmp_path / 'far.csv', {'time': [0.0, 0.1, 0.2, 0.3],
+                                           'joint3.position': [value] * 4,
+                                           'joint3.velocity': [0.0] * 4,
+                                           'joint3.acceleration': [0.0] * 4})
+    proc = subprocess.run(tool_command() + ['--params-file', str(PARAMS_A), '--input', str(src),
+                                            '--output', 'tau.csv'],
+                          cwd=tmp_path, text=True, capture_output=True, timeout=30)
+    assert 'Traceback' not in proc.stderr
+    assert proc.returncode in (0, 1)
+    if proc.returncode == 1:
+        [line] = error_lines(proc)
+        assert "row 1 (line 2 of the file), column(s) 'joint3.position'" in line
+    else:
+        _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
+        assert np.isfinite(tau).all()
+
+
+# --- no traceback, a useful line, for odd inputs -------------------------------------------------
+
+def test_a_utf16_file_is_named_as_such(tmp_path):
+    """Reliability item 6 (no input misleads): a UTF-16 file says so and how to fix it."""
+    src = tmp_path / 'traj.csv'
+    src.write_text('time,joint3.position\n0,1\n', encoding='utf-16')
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv', cwd=tmp_path)
+    assert proc.returncode == 1
+    [line] = error_lines(proc)
+    assert 'UTF-16' in line and 'save it as UTF-8' in line
+
+
+def test_a_huge_cell_is_quoted_short_and_named_beyond_a_double(tmp_path):
+    """Reliability item 6: a 5,000,000-digit number is beyond a double (not 'infinite'),
+    and the message quotes 40 characters of it, not 5 MB."""
+    src = tmp_path / 'traj.csv'
+    src.write_text('time,joint3.position\n0,1\n0.1,' + '1' * 5_000_000 + '\n')
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv', cwd=tmp_path)
+    assert proc.returncode == 1
+    [line] = error_lines(proc)
+    assert len(line) < 500
+    assert "row 2 (line 3 of the file), column 'joint3.position'" in line
+    assert 'beyond the range of a double' in line
+
+
+def test_a_million_ignored_columns_make_one_short_note(tmp_path):
+    """Reliability item 6: the note on ignored columns lists ten names and a count."""
+    n = 1_000_000
+    header = 'time,joint3.position,' + ','.join(f'c{i}' for i in range(n))
+    zeros = ','.join(['0'] * n)
+    rows = [f'{0.1 * k!r},1.5,{zeros}' for k in range(6)]
+    src = tmp_path / 'wide.csv'
+    src.write_text(header + '\n' + '\n'.join(rows) + '\n')
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[:500]
+    assert len(proc.stderr) < 2000
+    assert '(999,990 more)' in proc.stderr
+
+
+def test_a_binary_parameter_file_is_one_line_with_status_3(tmp_path):
+    """Reliability item 6: a parameter file that is not text: exit 3, one line, no traceback."""
+    params = tmp_path / 'bad.yaml'
+    params.write_bytes(b'\xff\xfe\x00\x01binary\xc6\x00')
+    proc = run_tool('--params-file', params, '--input', TARGET, '--output', 'tau.csv', cwd=tmp_path)
+    assert proc.returncode == 3
+    [line] = error_lines(proc)
+    assert str(params) in line and 'UTF-8' in line
