@@ -17,6 +17,7 @@ parameter's name (or ``params_file``), in time proportional to the size of the f
 are quoted in messages with a bounded ``show`` so that no message can grow without limit.
 """
 import math
+import re
 import reprlib
 
 import yaml
@@ -32,6 +33,14 @@ MAX_PARAMETERS = 100_000
 MAX_DEPTH = 16
 #: most entries of one list value (the longest lists are one entry per joint)
 MAX_LIST_LENGTH = 100_000
+#: largest parameter file read (characters). YAML is parsed in pure Python (libyaml's
+#: parser crashes the process on deeply nested input) at about 6 s per MB on a small
+#: machine; a mechanism within the size limits of mechanism.py takes well under 100 kB
+MAX_FILE_CHARS = 512 * 1024
+#: deepest nesting of YAML flow collections ([...] and {...}) read; PyYAML's scanner takes
+#: time quadratic in it before its recursion gives up
+MAX_FLOW_DEPTH = 32
+_BRACKETS = re.compile(r'[\[\]{}]')
 
 _SHOW = reprlib.Repr()
 _SHOW.maxstring = 60
@@ -108,7 +117,16 @@ def load_params_file(path, node_name=DEFAULT_NODE_NAME):
     """Dotted-name dict of the parameters a node called ``node_name`` gets from ``path``."""
     try:
         with open(path, encoding='utf-8') as stream:
-            document = yaml.safe_load(stream)
+            text = stream.read(MAX_FILE_CHARS + 1)
+        if len(text) > MAX_FILE_CHARS:
+            raise MechanismConfigError(
+                'params_file', f'{path} is larger than the supported {MAX_FILE_CHARS // 1024} kB; '
+                               f'a mechanism within the size limits (docs/mechanism.md) takes '
+                               f'far less: keep the mechanism in a file of its own')
+        _check_flow_depth(path, text)
+        document = yaml.safe_load(text)
+    except MechanismConfigError:
+        raise
     except OSError as exc:
         raise MechanismConfigError(
             'params_file', f'cannot read {path}: {exc.strerror or exc}') from exc
@@ -143,6 +161,23 @@ def load_params_file(path, node_name=DEFAULT_NODE_NAME):
     merged = dict(wildcard)
     merged.update(own)
     return merged
+
+
+def _check_flow_depth(path, text):
+    """Refuse flow collections nested deeper than MAX_FLOW_DEPTH, in one linear scan
+    (brackets inside strings and comments count too: only absurd files are refused)."""
+    depth = 0
+    for match in _BRACKETS.finditer(text):
+        if match.group() in '[{':
+            depth += 1
+            if depth > MAX_FLOW_DEPTH:
+                line = text.count('\n', 0, match.start()) + 1
+                raise MechanismConfigError(
+                    'params_file', f'{path} nests [...] or {{...}} more than {MAX_FLOW_DEPTH} '
+                                   f'deep (line {line}); a mechanism needs one level (lists of '
+                                   f'numbers or names)')
+        else:
+            depth = max(0, depth - 1)
 
 
 class ParameterReader:
