@@ -224,3 +224,73 @@ def test_first_problem_in_file_order_whatever_its_kind(tmp_path):
         text = f'{quote}time{quote},joint3.position\n0,1\n0.1,nan\n0.2,abc\n'
         with pytest.raises(tio.TrajectoryError, match=r"row 2 .*'joint3.position': NaN"):
             read(write(tmp_path, text))
+
+
+def test_find_jumps_compares_with_the_last_accepted_row():
+    """Reliability item 11: a jump beyond the per-row limit of its column is reported with
+    its row (1-based), column, step and reference row; after a jump, rows are compared with
+    the last row that was not one (one wild row is one jump, a lasting offset is many)."""
+    q = np.array([[1.0, 0.00], [1.1, 0.00], [7.4, 0.00], [1.2, 0.00], [1.3, 0.50],
+                  [1.3, 0.55], [1.3, 0.60]])
+    jumps = tio.find_jumps(q, [0.5, 0.1])
+    assert [(row, k, ref) for row, k, _, ref in jumps] == [(3, 0, 2), (5, 1, 4), (6, 1, 4),
+                                                           (7, 1, 4)]
+    assert jumps[0][2] == pytest.approx(6.3) and jumps[1][2] == pytest.approx(0.5)
+    assert tio.find_jumps(q, [np.inf, np.inf]) == []
+
+
+def test_unwrap_positions_takes_the_nearest_2pi_equivalent(tmp_path):
+    """Reliability item 11: each unwrapped angle is the 2 pi equivalent nearest the previous
+    row's; other columns are untouched; returns (rows shifted, wraps) per column."""
+    theta = 2.8 + 0.2 * np.arange(12)                 # passes +pi at row 3
+    wrapped = np.arctan2(np.sin(theta), np.cos(theta))
+    text = 'time,joint3.position,joint1.position\n' + ''.join(
+        f'{0.1 * k!r},{w!r},{w!r}\n' for k, w in enumerate(wrapped.tolist()))
+    traj = read(write(tmp_path, text), active=['joint1', 'joint3'])
+    counts = tio.unwrap_positions(traj, ['joint3'])
+    assert counts == {'joint3.position': (10, 1)}
+    np.testing.assert_allclose(traj.columns['joint3.position'], theta, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(traj.columns['joint1.position'], wrapped)
+
+
+def test_output_target_follows_links_and_refuses_special_files(tmp_path):
+    """Reliability item 16: atomic_output writes through a symlink (the link stays) and
+    never replaces a FIFO by a regular file."""
+    (tmp_path / 'real.csv').write_text('old')
+    os.symlink('real.csv', tmp_path / 'link.csv')
+    with tio.atomic_output(tmp_path / 'link.csv') as tmp:
+        with open(tmp, 'w') as f:
+            f.write('new')
+    assert os.path.islink(tmp_path / 'link.csv')
+    assert (tmp_path / 'real.csv').read_text() == 'new'
+    os.mkfifo(tmp_path / 'pipe')
+    with pytest.raises(tio.OutputPathError, match='FIFO'):
+        with tio.atomic_output(tmp_path / 'pipe'):
+            pass
+    assert stat.S_ISFIFO(os.lstat(tmp_path / 'pipe').st_mode)
+    assert sorted(os.listdir(tmp_path)) == ['link.csv', 'pipe', 'real.csv']
+
+
+@pytest.mark.parametrize('step, words', [(1e-300, 'too small'), (1e12, 'too large')])
+def test_setpoints_refuse_time_steps_outside_the_estimate_range(tmp_path, step, words):
+    """Reliability item 20: the row after the step and the column 'time' are named, with the
+    usable range; no floating-point warning."""
+    text = 'time,joint3.position\n' + ''.join(f'{k * step!r},1.5\n' for k in range(6))
+    traj = read(write(tmp_path, text))
+    with np.errstate(all='raise'):
+        with pytest.raises(tio.TrajectoryError, match=words) as info:
+            tio.setpoints(traj, ACTIVE)
+    assert info.value.row == 2 and info.value.column == 'time'
+    assert f'{tio.MIN_ESTIMATE_STEP:g} .. {tio.MAX_ESTIMATE_STEP:g} s' in str(info.value)
+
+
+def test_setpoints_name_the_row_where_an_estimate_overflows(tmp_path):
+    """Reliability item 20: an estimate beyond the range of a double names its row and the
+    position column instead of passing inf or NaN on."""
+    q = [0.0, 0.0, 0.0, 1e300, -1e300, 0.0, 0.0, 0.0]
+    text = 'time,joint3.position\n' + ''.join(f'{k * 1e-8!r},{v!r}\n' for k, v in enumerate(q))
+    traj = read(write(tmp_path, text))
+    with np.errstate(all='raise'):
+        with pytest.raises(tio.TrajectoryError, match='beyond the range of a double') as info:
+            tio.setpoints(traj, ACTIVE)
+    assert info.value.column == 'joint3.position' and info.value.row is not None
