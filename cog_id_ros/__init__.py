@@ -4,9 +4,9 @@
     solver = cog_id_ros.InverseDynamics(mech)
     tau = solver.torques(q, qd, qdd)
 """
-from .core import (ClosureError, CogIdError, Evaluation, InverseDynamics, Mechanism,
+from .core import (REASONS, ClosureError, CogIdError, Evaluation, InverseDynamics, Mechanism,
                    MechanismConfigError, SetpointError, SingularConfigurationError)
 
 __version__ = '0.1.0'
-__all__ = ['ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
+__all__ = ['REASONS', 'ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
            'MechanismConfigError', 'SetpointError', 'SingularConfigurationError', '__version__']

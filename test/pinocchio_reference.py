@@ -1,7 +1,7 @@
 """Independent reference inverse dynamics for closed-link mechanisms, built on Pinocchio.
 
 TEST ORACLE ONLY. It never imports cog_id_ros: it reads the mechanism parameter file
-(shared/design/mechanism-params.md) itself, so that it shares no code, and no reading of
+(the format documented in README.md) itself, so that it shares no code, and no reading of
 the file, with the package under test.
 
 Method (deliberately not the COG-Jacobian method of the package):
@@ -33,8 +33,11 @@ import math
 from collections import deque
 
 import numpy as np
-import pinocchio as pin
+import pytest
 import yaml
+
+# a test dependency only (package.xml <test_depend>): modules that need it skip without it
+pin = pytest.importorskip('pinocchio')
 
 __all__ = ['load_params', 'rpy_matrix', 'transform', 'Oracle']
 

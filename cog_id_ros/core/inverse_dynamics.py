@@ -162,8 +162,8 @@ class InverseDynamics:
                     if done is not None:
                         self._state = done[1]
                         return done[0]
-            except (TypeError, OverflowError):   # not a float somewhere: torques() reports it
-                pass
+            except (TypeError, ValueError, OverflowError, LookupError):
+                pass                 # not a list of floats: torques() reports what is wrong
         return self.torques(q, qd, qdd).tolist()
 
     def evaluate(self, q, qd=None, qdd=None, on_invalid='raise'):
@@ -183,7 +183,8 @@ class InverseDynamics:
         if single:
             step, self._state = self._solve_serial(q[0].tolist())
             return np.array(step.sol.q)
-        return self._solve_batch(q, 'raise')[1]
+        with np.errstate(all='ignore'):
+            return self._solve_batch(q, 'raise')[1]
 
     def cog_poses(self, q):
         """g_i (eq. 1): (positions (..., n_links, 3), rotations (..., n_links, 3, 3))."""
@@ -749,6 +750,8 @@ def _float_array(label, value, m):
         raw = np.asarray(value)
         if raw.dtype.kind not in 'iufO':
             raise TypeError(f'{raw.dtype} values')
+        if raw.dtype.kind == 'O' and any(x is None for x in raw.ravel().tolist()):
+            raise TypeError('None values')
         array = raw.astype(float)
     except (TypeError, ValueError, OverflowError) as exc:
         raise SetpointError(f'{label}: must be numbers (one per active joint), not {exc}') from None
