@@ -68,17 +68,18 @@ input CSV (comma-separated, header row first):
 derivative estimate (absent columns; needs at least {derivatives.STENCIL} rows):
 {textwrap.fill(derivatives.SCHEME + '.', 80, initial_indent='  ', subsequent_indent='  ')}
 
-  Estimates need time steps of {trajectory_io.MIN_ESTIMATE_STEP:g} .. {trajectory_io.MAX_ESTIMATE_STEP:g} s and must stay within the range of a
-  double; otherwise the row and the column are named (exit 1).
+  Estimates need time steps of {trajectory_io.MIN_ESTIMATE_STEP:g} .. {trajectory_io.MAX_ESTIMATE_STEP:g} s and values within the
+  range of a double; otherwise the row and the column are named (exit 1).
 
-jumps and wrapped angles: an active position that changes by more than --max-step
-  (default {DEFAULT_MAX_STEP} rad per row, revolute) or --max-step-linear (default
-  {DEFAULT_MAX_STEP_LINEAR} m per row, prismatic) from the row before is a bad row
-  (exit 1; with --skip-invalid the row is skipped with reason 'jump', and the next row
-  is compared with the last row that was not a jump). An encoder of a continuous joint
-  reports +pi then -pi: --unwrap takes each revolute position as the 2 pi equivalent
-  nearest the previous row's (prismatic columns untouched) and says how many rows it
-  shifted.
+jumps and wrapped angles: an active position that moves by more than --max-step
+  (default {DEFAULT_MAX_STEP} rad, revolute joints) or --max-step-linear (default {DEFAULT_MAX_STEP_LINEAR} m,
+  prismatic joints) from one row to the next is a bad row: exit 1, or with
+  --skip-invalid the row is skipped with reason 'jump' (and the next row is compared
+  with the last row that was not a jump). The limit is per row, not per second: a
+  wrapped angle jumps by ~2 pi in one row at any sample rate, and the solver follows
+  the mechanism from row to row. An encoder of a continuous joint reports +pi then
+  -pi: --unwrap takes each revolute position as the 2 pi equivalent nearest the
+  previous row's (prismatic columns untouched) and says how many rows it shifted.
 
 output CSV: time and <joint>.effort per active joint (N m or N), every value at
   full precision; the cells of a row skipped by --skip-invalid are empty.
@@ -205,9 +206,10 @@ def build_parser():
     parser.add_argument('--json', action='store_true',
                         help='print the summary as one JSON object instead of a table')
     parser.add_argument('--skip-invalid', action='store_true',
-                        help='skip samples where the loop cannot close or the mechanism is '
-                             'singular (list their rows on stderr, leave their efforts empty) '
-                             'instead of stopping')
+                        help='skip rows that cannot be solved (the loop cannot close, the '
+                             'mechanism is singular, the torques would overflow) or that jump '
+                             'beyond --max-step: list them on stderr with their reason, leave '
+                             'their efforts empty, instead of stopping')
     parser.add_argument('--node-name', default=None, metavar='NAME',
                         help='node entry of the parameter file to read (default: the '
                              "core's default, which also accepts /**)")

@@ -6,7 +6,8 @@ per sample, comma-separated, UTF-8 (a byte-order mark is allowed; cells may be q
 * ``time``: seconds, strictly increasing (not necessarily even steps or from 0).
 * For each active joint ``J``: ``J.position`` (required), ``J.velocity`` and
   ``J.acceleration`` (optional: estimated from the samples when absent, see
-  :mod:`cog_id_ros.derivatives`). Angles in radians, never wrapped.
+  :mod:`cog_id_ros.derivatives`). Angles in radians, not wrapped (``cog_id_torques
+  --unwrap`` unwraps them with :func:`unwrap_positions`).
 * ``J.position|velocity|acceleration`` columns of a joint of the mechanism that is not
   active are ignored (with a note); the same suffixes on a name that is not a joint of
   the mechanism are an error (a typo would otherwise go unnoticed). Any other column
@@ -30,6 +31,7 @@ import csv
 import math
 import os
 import re
+import signal
 import stat
 import tempfile
 
@@ -523,6 +525,25 @@ def _umask():
     return mask
 
 
+_STOP_SIGNALS = frozenset(getattr(signal, name) for name in ('SIGINT', 'SIGTERM', 'SIGHUP')
+                          if hasattr(signal, name))
+
+
+@contextlib.contextmanager
+def _stop_signals_blocked():
+    """Hold SIGINT, SIGTERM and SIGHUP back (they are delivered on leaving): a handler that
+    raises must not run between the creation of a temporary file and the moment its name
+    is known, or the file would be left behind."""
+    if not hasattr(signal, 'pthread_sigmask'):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 @contextlib.contextmanager
 def atomic_output(path):
     """Yield a temporary path next to ``path``'s target; rename it there on success only.
@@ -537,9 +558,10 @@ def atomic_output(path):
     directory = os.path.dirname(os.path.abspath(target))
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(dir=directory, prefix='.' + os.path.basename(target) + '.',
-                                   suffix='.tmp')
-        os.close(fd)
+        with _stop_signals_blocked():
+            fd, tmp = tempfile.mkstemp(dir=directory, prefix='.' + os.path.basename(target) + '.',
+                                       suffix='.tmp')
+            os.close(fd)
         yield tmp
         os.chmod(tmp, 0o666 & ~_umask())
         if output_target(path) != target:
