@@ -12,7 +12,7 @@ import yaml
 
 pytest.importorskip('rclpy')
 
-from conftest import BIN  # noqa: E402
+from conftest import BIN, REPO  # noqa: E402
 
 CONFIG_A = 'config/paper_four_bar_a.yaml'
 
@@ -28,9 +28,10 @@ def params_file(tmp_path, edit, source=CONFIG_A):
 
 
 def run_node(ros_env, *ros_args, timeout=60):
-    return subprocess.run([f'{BIN}/cog_id_node', '--ros-args', *ros_args], env=ros_env,
-                          stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                          timeout=timeout)
+    """The node of this checkout (python -m, cwd: the repository of this file)."""
+    return subprocess.run([sys.executable, '-m', 'cog_id_ros.node', '--ros-args', *ros_args],
+                          env=ros_env, cwd=REPO, stdin=subprocess.DEVNULL, capture_output=True,
+                          text=True, timeout=timeout)
 
 
 def _set(path, value):
@@ -65,6 +66,84 @@ BAD_FILES = {
     'unknown timeout_behavior': (_set('timeout_behavior', 'brake'), 'timeout_behavior', 'brake'),
     'negative setpoint_timeout': (_set('setpoint_timeout', -1.0), 'setpoint_timeout', None),
 }
+
+#: Reliability item 3: files that once ended the node with a traceback (exit status 1), or
+#: were accepted although they cannot be honoured; each must give exit 2 and one line.
+BAD_FILES_ITEM_3 = {
+    'empty com': (_set('links.link1.com', []), 'links.link1.com', None),
+    'empty active_joints': (_set('mechanism.active_joints', []), 'mechanism.active_joints', None),
+    'diagnostics_period 1e300': (_set('diagnostics_period', 1.0e300), 'diagnostics_period', None),
+    'diagnostics_period 1e10': (_set('diagnostics_period', 1.0e10), 'diagnostics_period', None),
+    'diagnostics_period 1e-12': (_set('diagnostics_period', 1.0e-12), 'diagnostics_period', None),
+    'setpoint_timeout 1e-12': (_set('setpoint_timeout', 1.0e-12), 'setpoint_timeout', None),
+    'reliability bogus': (_set('qos_overrides', {'/joint_setpoint': {'subscription': {
+        'reliability': 'bogus'}}}), 'qos_overrides./joint_setpoint.subscription.reliability',
+        'bogus'),
+    'depth -5': (_set('qos_overrides', {'/joint_setpoint': {'subscription': {'depth': -5}}}),
+                 'qos_overrides./joint_setpoint.subscription.depth', None),
+    'depth huge': (_set('qos_overrides', {'/effort_command': {'publisher': {
+        'depth': 99999999999}}}), 'qos_overrides./effort_command.publisher.depth', None),
+    'use_sim_time yes': (_set('use_sim_time', 'yes'), 'use_sim_time', None),
+    'max_setpoint_step negative': (_set('max_setpoint_step', [-1.0]), 'max_setpoint_step', None),
+    'max_trajectory_points 0': (_set('max_trajectory_points', 0), 'max_trajectory_points', None),
+}
+
+
+@pytest.mark.parametrize('case', list(BAD_FILES_ITEM_3))
+def test_start_up_refusals_are_one_line_and_exit_2(case, tmp_path, ros_env):
+    """Reliability item 3: empty YAML lists, periods rclpy cannot make a timer of (or that
+    flood /diagnostics), QoS overrides that cannot be honoured and a use_sim_time that is
+    not a bool gave tracebacks or ran on; now each is exit status 2 and one line naming
+    the parameter."""
+    edit, parameter, detail = BAD_FILES_ITEM_3[case]
+    result = run_node(ros_env, '--params-file', params_file(tmp_path, edit), '-r',
+                      '__ns:=/item3', timeout=30)
+    assert result.returncode == 2, result.stdout + result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert parameter in lines[0]
+    if detail:
+        assert detail in lines[0]
+
+
+def test_empty_effort_limits_means_no_limit(tmp_path, ros_env):
+    """Reliability item 3: ``effort_limits: []`` gave a traceback; it means no limit."""
+    path = params_file(tmp_path, _set('effort_limits', []))
+    proc = subprocess.Popen([sys.executable, '-m', 'cog_id_ros.node', '--ros-args',
+                             '--params-file', path, '-r', '__ns:=/nolimits'], cwd=REPO,
+                            env=ros_env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        first = proc.stdout.readline()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+    assert 'effort limits: joint3 inf' in first, first + out
+    assert proc.returncode == 0, out
+
+
+def test_a_params_file_rcl_cannot_parse_is_one_line_naming_the_parameter(tmp_path, ros_env):
+    """Reliability item 22: rcl's parse error printed two lines naming a line of the file;
+    now one line names the parameter and the file."""
+    text = open(CONFIG_A, encoding='utf-8').read()
+    path = tmp_path / 'mixed.yaml'
+    path.write_text(text.replace('gravity: [0.0, -9.81, 0.0]', 'gravity: [0, -9.81, 0]'))
+    assert 'gravity: [0, -9.81, 0]' in path.read_text()
+    result = run_node(ros_env, '--params-file', str(path), timeout=30)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert 'mechanism.gravity' in lines[0] and str(path) in lines[0]
+
+
+def test_help_prints_the_usage_and_exits_0(ros_env):
+    """Reliability item 25: --help answered 'cannot start: mechanism.links: missing'."""
+    for flag in ('--help', '-h'):
+        result = subprocess.run([sys.executable, '-m', 'cog_id_ros.node', flag], cwd=REPO,
+                                env=ros_env, capture_output=True, text=True, timeout=30)
+        assert result.returncode == 0, result.stderr
+        assert 'usage: cog_id_node' in result.stdout
+        assert '--params-file' in result.stdout and 'docs/node.md' in result.stdout
 
 
 @pytest.mark.parametrize('case', list(BAD_FILES))
