@@ -226,7 +226,7 @@ def _raise_cell_count(path, row, line, found, expected):
 
 def _parse_cell(text):
     s = text.strip()
-    if not s or '_' in s:
+    if not s or '_' in s or not s.isascii():   # as numpy reads: no '1_0', no '\uff11'
         raise ValueError(s)
     return float(s)
 

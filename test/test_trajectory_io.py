@@ -294,3 +294,13 @@ def test_setpoints_name_the_row_where_an_estimate_overflows(tmp_path):
         with pytest.raises(tio.TrajectoryError, match='beyond the range of a double') as info:
             tio.setpoints(traj, ACTIVE)
     assert info.value.column == 'joint3.position' and info.value.row is not None
+
+
+def test_a_non_ascii_digit_is_named_as_not_a_number(tmp_path):
+    """Reliability item 6 (no input misleads): a full-width digit (read by Python's float,
+    not by numpy) is named with its row and column, not as numpy's 'cannot parse'."""
+    text = 'time,joint3.position\n0,1\n0.1,\uff11\n0.2,1\n'
+    with pytest.raises(tio.TrajectoryError) as info:
+        read(write(tmp_path, text))
+    assert info.value.row == 2 and info.value.column == 'joint3.position'
+    assert "'\uff11' is not a number" in str(info.value)
