@@ -302,16 +302,19 @@ class Mechanism:
             out.append((lp.joint, [self.joints[j] for j in joints], res))
         return out
 
-    def _check_loops_hint(self, q):
-        """What to check: the joints of the loops that stay open at q (all loops if none)."""
+    def _check_loops_hint(self, q, joints=None):
+        """What to check: the joints of the loops that stay open at q, or else of the loops
+        through any of ``joints`` (indices), or else of all loops."""
         loops = self._loops_of(q)
-        bad = [lp for lp in loops if lp[2] is not None and lp[2] >= self.closure_tolerance] or loops
-        names = '; '.join(f"loop closed by '{self.joints[j]}' (joints {', '.join(js)}"
+        names = {self.joints[j] for j in joints or ()}
+        bad = ([lp for lp in loops if lp[2] is not None and lp[2] >= self.closure_tolerance]
+               or [lp for lp in loops if names & set(lp[1])] or loops)
+        which = '; '.join(f"loop closed by '{self.joints[j]}' (joints {', '.join(js)}"
                           + (f', residual {res:.3g})' if res is not None else ')')
                           for j, js, res in bad[:5])
         more = f' and {len(bad) - 5} more loops' if len(bad) > 5 else ''
         return (f'check the geometry (parent_xyz, child_xyz, *_rpy and axis) of the joints of '
-                f'{names}{more}, and initial_positions (the assembly mode)')
+                f'{which}{more}, and initial_positions (the assembly mode)')
 
     def _report_far_moves(self, start, q):
         """A note for every passive joint the assembly moved far from initial_positions."""
@@ -319,7 +322,7 @@ class Mechanism:
                     + [math.hypot(*spec.child_xyz) for spec in self.joint_specs] + [0.0])
         scale = scale if scale > 0.0 else 1.0
         held = set(self.active_index)
-        far = []
+        far, moved = [], []
         for j, (a, b) in enumerate(zip(start, q)):
             if j in held:
                 continue
@@ -327,13 +330,14 @@ class Mechanism:
                            else (FAR_FRACTION * scale, 'm'))
             if abs(b - a) > limit:
                 far.append(f"'{self.joints[j]}' from {a:.6g} to {b:.6g} {unit}")
+                moved.append(j)
         if far:
             self._note(
                 f'closing the loops with the actuators held at initial_positions moved passive '
                 f'joint(s) {", ".join(far)} (more than {FAR_ANGLE:g} rad or {FAR_FRACTION:.0%} of '
                 f'the mechanism scale {scale:.3g} m): the geometry (xyz, rpy, axis) or '
                 f'initial_positions are probably not what was meant; '
-                f'{self._check_loops_hint(None)}')
+                f'{self._check_loops_hint(None, moved)}')
 
     def _note(self, text):
         self.assembly_warnings.append(text)
