@@ -746,6 +746,26 @@ def _check_jumps(args, mech, traj, active):
     return keep, skipped
 
 
+def _short_pieces(traj, active, keep):
+    """With derivatives to estimate, rows left in pieces of fewer than STENCIL rows between
+    skipped stretches (see trajectory_io.kept_pieces) cannot be estimated: skip them too
+    (reason 'jump'), updating ``keep``."""
+    fields = ('velocity', 'acceleration')
+    if all(trajectory_io.joint_column(j, f) in traj.columns for j in active for f in fields):
+        return []
+    skipped = []
+    for rows in trajectory_io.kept_pieces(keep):
+        if rows.size >= derivatives.STENCIL:
+            continue
+        first, last = int(rows[0]) + 1, int(rows[-1]) + 1
+        for r in rows.tolist():
+            keep[r] = False
+            skipped.append(Skip(r + 1, 'jump', f'rows {first}..{last} are cut off by rows skipped '
+                                f'as jumps: too few ({rows.size}) to estimate derivatives from '
+                                f'(at least {derivatives.STENCIL} needed)'))
+    return skipped
+
+
 class _Outputs:
     """Which user path (--output or --plot) a write error is about, from its file names."""
 
@@ -834,6 +854,8 @@ def run(args, stdout, stderr, signals=None):
                 for col, (r, w) in unwrapped.items()) or 'no revolute active joint to unwrap'),
                 file=stderr)
         keep, jump_skips = _check_jumps(args, mech, traj, active)
+        if jump_skips:
+            jump_skips += _short_pieces(traj, active, keep)
         q, qd, qdd, estimated = trajectory_io.setpoints(
             traj, active, keep if jump_skips else None)
     except TrajectoryError as exc:

@@ -390,6 +390,16 @@ def find_jumps(q, limits, block=4096):
     return jumps
 
 
+def kept_pieces(keep, max_gap=1):
+    """Split the kept rows (0-based indices of ``keep``) where two or more rows in a row
+    were dropped: derivatives are estimated across a single dropped row (a glitch; the
+    motion around it is smooth) but never across a longer gap, which may hide any motion."""
+    rows = np.flatnonzero(keep)
+    if rows.size == 0:
+        return []
+    return np.split(rows, np.flatnonzero(np.diff(rows) > max_gap + 1) + 1)
+
+
 def setpoints(traj, active_joints, keep=None):
     """Positions, velocities and accelerations (N, M) of the active joints.
 
@@ -397,51 +407,63 @@ def setpoints(traj, active_joints, keep=None):
     :mod:`cog_id_ros.derivatives`: a velocity from the positions; an acceleration from
     the velocity column when the file has one, else from the positions. ``keep`` (N,)
     bool, optional: only these rows are used for (and get) estimates; the others (rows
-    skipped before solving) get velocity and acceleration 0. Returns
-    ``(q, qd, qdd, estimated)`` where ``estimated`` lists the estimated column names.
+    skipped before solving) get velocity and acceleration 0. Estimates span a single
+    dropped row but not two or more: the kept rows are differentiated in pieces
+    (:func:`kept_pieces`; one-sided stencils at the ends of each piece), and every piece
+    needs ``derivatives.STENCIL`` rows. Returns ``(q, qd, qdd, estimated)`` where
+    ``estimated`` lists the estimated column names.
 
-    Raises :class:`TrajectoryError` when an estimate cannot be made: fewer than
-    ``derivatives.STENCIL`` rows, a time step outside
+    Raises :class:`TrajectoryError` when an estimate cannot be made: too few rows (in
+    the file or in a piece), a time step outside
     [``MIN_ESTIMATE_STEP``, ``MAX_ESTIMATE_STEP``] (column ``time``, the row after the
     step), or an estimate beyond the range of a double (the position column).
     """
     n = len(traj)
     m = len(active_joints)
-    rows = np.arange(n) if keep is None else np.flatnonzero(keep)
+    pieces = [np.arange(n)] if keep is None else kept_pieces(keep)
     q = np.empty((n, m))
     qd = np.zeros((n, m))
     qdd = np.zeros((n, m))
-    estimated = []
-    time = traj.time[rows]
     need = [joint_column(j, f) for j in active_joints for f in ('velocity', 'acceleration')
             if joint_column(j, f) not in traj.columns]
-    if need and rows.size < derivatives.STENCIL:
-        skipped = '' if rows.size == n else f' ({n - rows.size:,} skipped)'
+    for rows in pieces if need else []:
+        if rows.size >= derivatives.STENCIL:
+            continue
+        if keep is None:
+            raise TrajectoryError(
+                traj.path,
+                f'absent, and estimating it needs at least {derivatives.STENCIL} rows '
+                f'(the file has {n}); add the column', column=need[0])
         raise TrajectoryError(
             traj.path,
-            f'absent, and estimating it needs at least {derivatives.STENCIL} rows '
-            f'(the file has {rows.size}{skipped}); add the column', column=need[0])
-    if need:
-        _check_steps(traj.path, time, rows, need[0])
+            f'absent, and estimating it needs at least {derivatives.STENCIL} consecutive rows; '
+            f'rows {int(rows[0]) + 1}..{int(rows[-1]) + 1} are {rows.size} between skipped rows',
+            row=int(rows[0]) + 1, column=need[0])
+    for rows in pieces if need else []:
+        _check_steps(traj.path, traj.time[rows], rows, need[0])
+    estimated = []
     for k, joint in enumerate(active_joints):
         pos = traj.columns[joint_column(joint, 'position')]
         vel = traj.columns.get(joint_column(joint, 'velocity'))
         acc = traj.columns.get(joint_column(joint, 'acceleration'))
         q[:, k] = pos
         if vel is None:
-            qd[rows, k] = _estimate(traj.path, time, pos[rows], 1, rows, joint, 'velocity')
             estimated.append(joint_column(joint, 'velocity'))
         else:
             qd[:, k] = vel
         if acc is None:
-            if vel is None:
-                qdd[rows, k] = _estimate(traj.path, time, pos[rows], 2, rows, joint, 'acceleration')
-            else:
-                qdd[rows, k] = _estimate(traj.path, time, vel[rows], 1, rows, joint,
-                                         'acceleration', source='velocity')
             estimated.append(joint_column(joint, 'acceleration'))
         else:
             qdd[:, k] = acc
+        for rows in pieces:
+            time = traj.time[rows]
+            if vel is None:
+                qd[rows, k] = _estimate(traj.path, time, pos[rows], 1, rows, joint, 'velocity')
+            if acc is None and vel is None:
+                qdd[rows, k] = _estimate(traj.path, time, pos[rows], 2, rows, joint, 'acceleration')
+            elif acc is None:
+                qdd[rows, k] = _estimate(traj.path, time, vel[rows], 1, rows, joint,
+                                         'acceleration', source='velocity')
     return q, qd, qdd, estimated
 
 
