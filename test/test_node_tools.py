@@ -84,3 +84,17 @@ def test_fig4_demo_writes_the_figure_and_the_efforts(ros_env, tmp_path):
     assert [r[:2] for r in rows] == [['(a)', 'joint3'], ['(b)', 'joint1'], ['(b)', 'joint3']]
     assert all(r[-1] == 'yes' for r in rows)
     assert os.path.basename(str(png)) in result.stdout
+
+
+def test_dev_without_a_command_prints_its_usage():
+    """Reliability item 25: ./dev with no argument printed lines of its own shell code
+    (and exit status 2); now a usage text and exit status 0, an unknown command exit 2."""
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    result = subprocess.run([os.path.join(repo, 'dev')], capture_output=True, text=True,
+                            timeout=30)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith('usage: ./dev')
+    assert 'set -euo' not in result.stdout and 'here=' not in result.stdout
+    result = subprocess.run([os.path.join(repo, 'dev'), 'bogus'], capture_output=True,
+                            text=True, timeout=30)
+    assert result.returncode == 2 and "unknown command 'bogus'" in result.stderr
