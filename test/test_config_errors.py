@@ -430,3 +430,16 @@ def test_the_example_mechanisms_load_without_assembly_notes():
         warnings.simplefilter('error', AssemblyWarning)
         for path in files:
             assert cog_id_ros.Mechanism.from_params_file(path).assembly_warnings == []
+
+
+@pytest.mark.parametrize('value', [10 ** 400, -(10 ** 309)], ids=['10**400', '-10**309'])
+def test_numbers_too_large_for_a_float_say_so(value):
+    """Reliability item 4: an integer (or numpy long double) beyond the float range is
+    'too large for a float' on its parameter, not an OverflowError or a bare 'inf'."""
+    import numpy as np
+    for number in (value, np.longdouble(value)):
+        params = with_changes(from_yaml(PAPER_A), links__link2__mass=number)
+        with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+            cog_id_ros.Mechanism.from_parameters(params)
+        assert info.value.parameter == 'links.link2.mass'
+        assert 'too large for a float' in str(info.value)

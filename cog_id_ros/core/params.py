@@ -276,8 +276,19 @@ def as_float(name, value):
             name, f'must be a finite number, got an integer of about {digits} digits, too '
                   f'large for a float') from None
     if not math.isfinite(number):
+        if math.isinf(number) and _is_number_like(value) and _finite_in_own_type(value):
+            raise MechanismConfigError(
+                name, f'must be a finite number, got {show(value)}, too large for a float')
         raise MechanismConfigError(name, f'must be a finite number, got {number!r}')
     return number
+
+
+def _finite_in_own_type(value):
+    try:
+        import numpy as np
+        return bool(np.isfinite(value))
+    except (ImportError, TypeError):  # pragma: no cover
+        return False
 
 
 def _is_number_like(value):
