@@ -45,6 +45,7 @@ import math
 import multiprocessing
 import os
 import re
+import signal
 import sys
 import tempfile
 import threading
@@ -829,7 +830,16 @@ class TrajectoryWorker:
         parent, child = context.Pipe()
         process = context.Process(target=trajectory_process, args=(child, self.config),
                                   name='cog_id_node trajectories', daemon=True)
-        process.start()
+        # Started with SIGINT ignored, so Python keeps ignoring it from the first line on:
+        # Ctrl-C in a terminal reaches the whole process group, and a KeyboardInterrupt
+        # while the process imports would print a traceback. The node ends it itself.
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+        try:
+            process.start()
+        finally:
+            if main_thread:
+                signal.signal(signal.SIGINT, previous)
         child.close()
         self._process, self._conn = process, parent
 

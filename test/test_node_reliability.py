@@ -271,3 +271,20 @@ def test_too_long_a_trajectory_is_rejected_with_a_reason(ros_process, probe_for)
     kv = latest_values(probe, time.monotonic())
     assert kv['trajectories_rejected.too_long'] == '1', (kv, proc.output)
     assert 'trajectory of 101 points rejected (too_long)' in proc.output
+
+
+def test_a_second_trajectory_waits_and_a_third_replaces_it(ros_process, probe_for):
+    """Reliability item 9: what happens to trajectories that arrive while one is solved
+    was undefined (each held up the node in turn); one waits, a newer one replaces it
+    and the replaced one is counted as rejected (busy)."""
+    start(ros_process, '/queue')
+    probe = probe_for('/queue')
+    probe.trajectories.publish(long_trajectory(30_000))
+    q = np.full((6, 1), 1.4)
+    probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
+    probe.trajectories.publish(make_trajectory(['joint3'], q[:5], q[:5] * 0, q[:5] * 0))
+    assert wait_until(lambda: len(probe.effort_trajectories) >= 2, timeout=120)
+    time.sleep(0.5)
+    assert [len(m.points) for m in probe.effort_trajectories] == [30_000, 5]
+    kv = latest_values(probe, time.monotonic())
+    assert kv['trajectories_rejected.busy'] == '1'
