@@ -360,9 +360,14 @@ def _check_paths(args):
     if not os.path.isfile(args.params_file):
         what = 'no such file' if not os.path.exists(args.params_file) else 'not a regular file'
         raise ToolError(f'--params-file {args.params_file}: {what}', EXIT_PARAMS)
-    outputs = [('--output', args.output)] + ([('--plot', args.plot)] if args.plot else [])
+    outputs = [('--output', args.output)] + ([('--plot', args.plot)] if args.plot is not None else [])
     targets = {}
     for option, path in outputs:
+        if not path:
+            raise ToolError(f'{option}: the path is empty', EXIT_USAGE)
+        if path.endswith(('/', os.sep)):
+            raise ToolError(f'{option} {path}: ends with {path[-1]}, so it names a directory; '
+                            'give a file name', EXIT_USAGE)
         try:
             target = trajectory_io.output_target(path)
         except trajectory_io.OutputPathError as exc:
@@ -374,6 +379,8 @@ def _check_paths(args):
             raise ToolError(f'{option} {path}: directory {directory} is not writable', EXIT_USAGE)
         if os.path.exists(target) and os.path.samefile(target, args.input):
             raise ToolError(f'{option} {path}: is the input file', EXIT_USAGE)
+        if os.path.exists(target) and os.path.samefile(target, args.params_file):
+            raise ToolError(f'{option} {path}: is the parameter file', EXIT_USAGE)
         targets[option] = os.path.abspath(target)
     if args.plot and targets['--plot'] == targets['--output']:
         raise ToolError(f'--plot {args.plot}: is the same file as --output', EXIT_USAGE)

@@ -406,3 +406,22 @@ def test_skipped_jumps_never_feed_estimates_across_a_gap(tmp_path):
     assert later.size > 0                     # rows solved after the first gap
     scale = np.max(np.abs(expected))
     np.testing.assert_allclose(tau[solved], expected[solved], rtol=0, atol=1e-6 * scale)
+
+
+@pytest.mark.parametrize('args, words', [
+    (['--output', ''], '--output: the path is empty'),
+    (['--output', 'tau.csv', '--plot', ''], '--plot: the path is empty'),
+    (['--output', 'nodir/'], '--output nodir/: ends with /'),
+    (['--output', 'params.yaml'], '--output params.yaml: is the parameter file'),
+])
+def test_output_paths_that_cannot_be_meant_are_refused_before_any_work(tmp_path, args, words):
+    """Reliability item 16: an empty path (--plot '' used to draw nothing, silently), a
+    directory-like path, or the parameter file itself: exit 2 and one line, nothing written."""
+    params = tmp_path / 'params.yaml'
+    params.write_text(PARAMS_A.read_text())
+    proc = run_tool('--params-file', 'params.yaml', '--input', TARGET, *args, cwd=tmp_path)
+    assert proc.returncode == 2
+    [line] = error_lines(proc)
+    assert words in line
+    assert os.listdir(tmp_path) == ['params.yaml']
+    assert params.read_text() == PARAMS_A.read_text()
