@@ -41,6 +41,8 @@ import math
 import os
 import random
 import signal
+import subprocess
+import sys
 import threading
 import time
 import warnings
@@ -583,7 +585,7 @@ KNOWN_BUGS = {
 }
 
 
-@fuzz_settings(400)
+@fuzz_settings(800)
 @given(api_calls())
 def test_api_any_input_only_cog_id_errors_and_finite_results(call):
     hypothesis.assume(known_bug(*call) is None)
@@ -720,6 +722,68 @@ def test_params_not_a_dict_of_names(value):
 @pytest.mark.parametrize('path', ['/nonexistent/x.yaml', '/', '/dev/null', '', '\x00'])
 def test_params_file_paths(path):
     check_load(lambda: cog_id_ros.Mechanism.from_params_file(path), f'from_params_file({path!r})')
+
+
+def check_node_start(text, directory, env, timeout=20.0):
+    """cog_id_node on params file ``text``: starts (then SIGINT -> 0) or exits 2 with one
+    'cannot start' line; never a traceback. Returns 'started' or 'refused'."""
+    path = os.path.join(directory, 'node_fuzz.yaml')
+    with open(path, 'w', encoding='utf-8', errors='surrogateescape') as f:
+        f.write(text)
+    exe = os.path.join(os.path.dirname(sys.executable), 'cog_id_node')
+    log_path = os.path.join(directory, 'node_fuzz.log')
+    with open(log_path, 'w') as log:
+        proc = subprocess.Popen([exe, '--ros-args', '--params-file', path], env=env, cwd=REPO,
+                                stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+
+    def read():
+        with open(log_path, encoding='utf-8', errors='replace') as f:
+            return f.read()
+
+    end = time.monotonic() + timeout
+    output = ''
+    while time.monotonic() < end:
+        output = read()
+        if "mechanism '" in output or proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    if proc.poll() is None:
+        if "mechanism '" not in output:
+            proc.kill()
+            proc.wait()
+            raise AssertionError(f'cog_id_node neither started nor refused within {timeout:g} s')
+        proc.send_signal(signal.SIGINT)
+        try:
+            status = proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise AssertionError('cog_id_node did not stop on SIGINT within 15 s') from None
+        output = read()
+        assert status == 0, f'exit status {status} after SIGINT:\n{output[-2000:]}'
+        assert 'Traceback' not in output, output[-3000:]
+        return 'started'
+    output = read()
+    status = proc.returncode
+    assert 'Traceback' not in output, f'traceback at start-up:\n{output[-3000:]}'
+    assert status == 2, f'exit status {status} (expected 2):\n{output[-2000:]}'
+    lines = [line for line in output.splitlines() if line.strip()]
+    assert lines and 'cannot start' in lines[-1], f'no "cannot start" line:\n{output[-2000:]}'
+    return 'refused'
+
+
+def _config_text(name):
+    with open(os.path.join(REPO, 'config', name), encoding='utf-8') as f:
+        return f.read()
+
+
+@fuzz_settings(5)
+@given(param_files())
+@hypothesis.example(text=_config_text('paper_four_bar_b.yaml'))          # starts
+@hypothesis.example(text=_config_text('five_bar.yaml').replace('0.25', '-0.25', 1))  # mass < 0
+def test_node_start_up_on_any_params_file(ros_env, tmp_path_factory, text):
+    """cog_id_node on a fuzzed params file starts (and stops with 0 on SIGINT) or exits with
+    status 2 and one 'cannot start' line: never a traceback, never a hang."""
+    check_node_start(text, str(tmp_path_factory.getbasetemp()), ros_env)
 
 
 # --- the tests: the node ------------------------------------------------------------------------
