@@ -27,6 +27,16 @@ def _quantity(unit):
 
 def plot_efforts(path, time, efforts, valid, joints, stats, title, units, subtitle=None,
                  fmt='png'):
+    """Draw and save the effort plot (see :func:`_plot`); when matplotlib cannot lay out
+    the time axis (times near 1e308 s overflow its tick computation), the curves are
+    drawn against the row number instead, and the axis label says why."""
+    try:
+        _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, False)
+    except (ValueError, OverflowError, FloatingPointError):
+        _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, True)
+
+
+def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, by_row):
     """Draw and save the effort plot.
 
     ``time`` (N,), ``efforts`` (N, M), ``valid`` (N,) bool (False: skipped sample, drawn
@@ -40,6 +50,8 @@ def plot_efforts(path, time, efforts, valid, joints, stats, title, units, subtit
     from matplotlib.figure import Figure
 
     time = np.asarray(time, dtype=float)
+    if by_row:       # rows count from 1, like every message of the tool
+        time = np.arange(1.0, time.size + 1.0)
     efforts = np.asarray(efforts, dtype=float).reshape(time.size, -1)
     valid = np.ones(time.size, bool) if valid is None else np.asarray(valid, bool)
     n_joints = efforts.shape[1]
@@ -55,7 +67,8 @@ def plot_efforts(path, time, efforts, valid, joints, stats, title, units, subtit
         ax.plot(time, curve, color='C0', lw=1.4, marker=marker, ms=4,
                 label=f'{joint} {quantity}')
         if st.get('peak_effort') is not None:
-            ax.plot([st['peak_effort_time']], [st['peak_effort_signed']], 'o', color='C3',
+            x_peak = float(st['peak_effort_row']) if by_row else st['peak_effort_time']
+            ax.plot([x_peak], [st['peak_effort_signed']], 'o', color='C3',
                     ms=7, mfc='none', mew=1.8,
                     label=f"peak |{symbol}| = {_fmt(st['peak_effort'])} {unit}  "
                           f"(t = {_fmt(st['peak_effort_time'])} s, row {st['peak_effort_row']})")
@@ -72,7 +85,8 @@ def plot_efforts(path, time, efforts, valid, joints, stats, title, units, subtit
         ax.legend(loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize='small',
                   frameon=False, borderaxespad=0.0)
         ax.set_title(f'{joint}', loc='left', fontsize='medium', fontweight='bold')
-    axes[-1].set_xlabel('time  [s]')
+    axes[-1].set_xlabel('row  (the times are too large to draw an axis of)' if by_row
+                        else 'time  [s]')
     if time.size:
         axes[-1].set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
     kinds = sorted({_quantity(u)[0] for u in units})

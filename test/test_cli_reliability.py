@@ -425,3 +425,18 @@ def test_output_paths_that_cannot_be_meant_are_refused_before_any_work(tmp_path,
     assert words in line
     assert os.listdir(tmp_path) == ['params.yaml']
     assert params.read_text() == PARAMS_A.read_text()
+
+
+def test_times_near_the_largest_double_still_give_a_plot(tmp_path):
+    """Reliability item 20 (and 6): times of 1e308 s overflowed matplotlib's tick
+    computation ('arange: cannot compute length', no output at all); the plot is then
+    drawn against the row number."""
+    src = write_csv(tmp_path / 'traj.csv', {'time': [1e308, 1.7e308], 'joint3.position': [1.0, 1.0],
+                                            'joint3.velocity': [0.0, 0.0],
+                                            'joint3.acceleration': [0.0, 0.0]})
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv', '--plot',
+                    'tau.png', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / 'tau.png').read_bytes()[:4] == b'\x89PNG'
+    _, t, tau = tio.read_efforts(tmp_path / 'tau.csv')
+    assert t.tolist() == [1e308, 1.7e308] and np.isfinite(tau).all()
