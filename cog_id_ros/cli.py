@@ -453,7 +453,7 @@ def _reason(exc):
 def _row_level(exc):
     """A core error about one sample (skippable), not about the mechanism or the call."""
     from .core.errors import REASONS
-    return getattr(exc, 'reason', None) in REASONS and getattr(exc, 'sample', None) is not None
+    return getattr(exc, 'reason', None) in REASONS
 
 
 class Skip:
@@ -874,7 +874,8 @@ def run(args, stdout, stderr, signals=None):
         print(f'{PROG}: note: estimating ' + ', '.join(estimated)
               + ' by finite differences (see --help)', file=stderr)
     n = len(traj)
-    progress = ProgressBar(n, stderr, ProgressBar.wanted(n, stderr, args.no_progress))
+    to_solve = int(np.count_nonzero(keep))
+    progress = ProgressBar(to_solve, stderr, ProgressBar.wanted(to_solve, stderr, args.no_progress))
     progress.update(0)
     try:
         efforts, valid, skipped = solve(solver, q, qd, qdd, args.chunk_size, args.skip_invalid,
