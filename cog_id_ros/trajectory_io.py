@@ -495,8 +495,10 @@ def _estimate(path, time, values, order, rows, joint, field, source='position'):
     return result
 
 
-class OutputPathError(ValueError):
-    """An output path that must not be written (a FIFO, a device, ...): the message says why."""
+class OutputPathError(OSError):
+    """An output path that must not be written (a FIFO, a device, ...): the message says why.
+
+    An ``OSError``, so callers that handle write errors handle this refusal too."""
 
 
 _SPECIAL = ((stat.S_ISFIFO, 'a FIFO (named pipe)'), (stat.S_ISCHR, 'a character device'),
