@@ -440,3 +440,25 @@ def test_times_near_the_largest_double_still_give_a_plot(tmp_path):
     assert (tmp_path / 'tau.png').read_bytes()[:4] == b'\x89PNG'
     _, t, tau = tio.read_efforts(tmp_path / 'tau.csv')
     assert t.tolist() == [1e308, 1.7e308] and np.isfinite(tau).all()
+
+
+def test_torques_beyond_a_double_are_a_bad_row_or_skipped_as_out_of_range(tmp_path):
+    """Reliability item 18: a row whose torques would overflow (velocity 1e160 rad/s) is a
+    bad row like others: exit 1 naming the row and the column holding the huge value, or
+    with --skip-invalid skipped with the core's reason 'out_of_range'; never inf in the file."""
+    src = write_csv(tmp_path / 'traj.csv', {'time': [0.0, 0.1, 0.2],
+                                            'joint3.position': [1.0, 1.0, 1.0],
+                                            'joint3.velocity': [0.0, 1e160, 0.0],
+                                            'joint3.acceleration': [0.0, 0.0, 0.0]})
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv', cwd=tmp_path)
+    assert proc.returncode == 1
+    [line] = error_lines(proc)
+    assert "row 2 (line 3 of the file), column(s) 'joint3.velocity'" in line
+    assert not (tmp_path / 'tau.csv').exists()
+    proc = run_tool('--params-file', PARAMS_A, '--input', src, '--output', 'tau.csv',
+                    '--skip-invalid', '--json', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    s = strict_json(proc.stdout)
+    assert s['skipped_rows'] == [2] and s['skipped_reasons'] == {'out_of_range': 1}
+    _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
+    assert np.isnan(tau[1, 0]) and np.isfinite(tau[[0, 2], 0]).all()
