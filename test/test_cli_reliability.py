@@ -462,3 +462,43 @@ def test_torques_beyond_a_double_are_a_bad_row_or_skipped_as_out_of_range(tmp_pa
     assert s['skipped_rows'] == [2] and s['skipped_reasons'] == {'out_of_range': 1}
     _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
     assert np.isnan(tau[1, 0]) and np.isfinite(tau[[0, 2], 0]).all()
+
+
+def test_a_row_error_raised_in_skip_mode_skips_only_that_row():
+    """Reliability item 18: should the core raise a row-level error (with its sample and
+    reason) instead of marking the row, --skip-invalid still skips just that row, keyed by
+    the error's reason, and solves the rest of the chunk."""
+    import cog_id_ros
+    from cog_id_ros import cli
+
+    class Evaluation:
+        def __init__(self, q):
+            self.torques = 2.0 * q
+            self.valid = np.ones(len(q), bool)
+            self.errors = [None] * len(q)
+
+    class Solver:
+        class mechanism:
+            active_joints = ['j']
+
+        def evaluate(self, q, qd, qdd, on_invalid):
+            bad = np.flatnonzero(q[:, 0] > 100.0)
+            if bad.size:
+                raise cog_id_ros.SetpointError('too large', sample=int(bad[0]),
+                                               reason='out_of_range')
+            return Evaluation(q)
+
+    class NoBar:
+        def update(self, done):
+            pass
+
+        def close(self):
+            pass
+
+    q = np.arange(10.0).reshape(10, 1)
+    q[[3, 7]] = 1e3
+    zeros = np.zeros_like(q)
+    efforts, valid, skipped = cli.solve(Solver(), q, zeros, zeros, 4, True, NoBar(), 'f.csv')
+    assert [(s.row, s.reason) for s in skipped] == [(4, 'out_of_range'), (8, 'out_of_range')]
+    assert valid.tolist() == [i not in (3, 7) for i in range(10)]
+    np.testing.assert_array_equal(efforts[valid], 2.0 * q[valid])
