@@ -502,3 +502,16 @@ def test_a_row_error_raised_in_skip_mode_skips_only_that_row():
     assert [(s.row, s.reason) for s in skipped] == [(4, 'out_of_range'), (8, 'out_of_range')]
     assert valid.tolist() == [i not in (3, 7) for i in range(10)]
     np.testing.assert_array_equal(efforts[valid], 2.0 * q[valid])
+
+
+def test_help_documents_the_new_options_and_statuses(tmp_path):
+    """Reliability items 11, 16, 17, 18, 20: --help names --unwrap and --max-step with their
+    defaults and units, special output files, the signal statuses and the estimate range."""
+    proc = run_tool('--help', cwd=tmp_path)
+    assert proc.returncode == 0
+    text = ' '.join(proc.stdout.split())
+    for words in ('--unwrap', '--max-step RAD', '--max-step-linear M', 'default 0.5 rad',
+                  'default 0.1 m', "reason 'jump'", 'per row, not per second',
+                  'a FIFO, device or socket is refused', '143 SIGTERM', '129 SIGHUP',
+                  '1e-09 .. 1e+09 s', 'null in the JSON'):
+        assert words in text, words
