@@ -4,9 +4,11 @@
     solver = cog_id_ros.InverseDynamics(mech)
     tau = solver.torques(q, qd, qdd)
 """
-from .core import (REASONS, ClosureError, CogIdError, Evaluation, InverseDynamics, Mechanism,
-                   MechanismConfigError, SetpointError, SingularConfigurationError)
+from .core import (REASONS, AssemblyWarning, ClosureError, CogIdError, Evaluation,
+                   InverseDynamics, Mechanism, MechanismConfigError, SetpointError,
+                   SingularConfigurationError)
 
 __version__ = '0.1.0'
-__all__ = ['REASONS', 'ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
-           'MechanismConfigError', 'SetpointError', 'SingularConfigurationError', '__version__']
+__all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',
+           'InverseDynamics', 'Mechanism', 'MechanismConfigError', 'SetpointError',
+           'SingularConfigurationError', '__version__']

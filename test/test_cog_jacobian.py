@@ -14,11 +14,11 @@ CASES = {
     'paper_a': (lambda: mech.from_yaml('config/paper_four_bar_a.yaml'), lambda t: [_paper(t)]),
     'paper_b': (lambda: mech.from_yaml('config/paper_four_bar_b.yaml'), lambda t: [_paper(t), _paper(t)]),
     'crank_rocker': (lambda: mech.four_bar(ground=0.6, crank=0.2, coupler=0.6, rocker=0.4,
-                                           active=('joint1',), init=[1.0, -0.5, 2.0, 0.5]),
+                                           active=('joint1',), init=[1.0, -0.6127, 1.4111, 1.0238]),
                      lambda t: [0.9 + 2.0 * t + 0.3 * np.sin(3 * t)]),
     'rocker_driven_on_loop_joint': (
         lambda: mech.four_bar(ground=0.6, crank=0.2, coupler=0.6, rocker=0.4, active=('joint4',),
-                              init=[1.0, -0.5, 2.0, 0.5]),
+                              init=[1.0, -0.6127, 1.4111, 1.0238]),
         lambda t: [0.98 + 0.2 * np.sin(2 * t)]),
     'slider_crank': (mech.slider_crank, lambda t: [0.3 + 4.0 * t + 0.5 * np.sin(2 * t)]),
     'double_pendulum': (mech.double_pendulum,

@@ -10,7 +10,7 @@ joint rates), kinematics.py (tree, poses, twists), spatial.py / lane_linalg.py (
 from .errors import (REASONS, ClosureError, CogIdError, MechanismConfigError, SetpointError,
                      SingularConfigurationError)
 from .inverse_dynamics import Evaluation, InverseDynamics
-from .mechanism import Mechanism
+from .mechanism import AssemblyWarning, Mechanism
 
-__all__ = ['REASONS', 'ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
+__all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
            'MechanismConfigError', 'SetpointError', 'SingularConfigurationError']

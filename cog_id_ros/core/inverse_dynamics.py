@@ -779,8 +779,7 @@ def _unreachable(mechanism, start, target, sample, why):
     return ClosureError(
         f'{where}cannot reach the setpoint {_fmt(target)} from the last pose {_fmt(last)} '
         f'of {mechanism.active_joints}: {why}. Send setpoints closer together (the solver '
-        f'follows the assembly branch in short steps), or reset() to start over from '
-        f'initial_positions', math.inf, sample, reason='unreachable')
+        f'follows the assembly branch in short steps)', math.inf, sample, reason='unreachable')
 
 
 def _out_of_range(qd, qdd, sample):
@@ -793,11 +792,18 @@ def _out_of_range(qd, qdd, sample):
         sample=sample, reason='out_of_range')
 
 
+#: links x actuators above which the per-sample code is not traced: its size grows with
+#: that product (about 8 operations each) and tracing costs ~3 kB per operation, so a
+#: large mechanism would load for seconds; the general lane path serves it instead
+TRACE_BUDGET = 2500
+
+
 def _sample_program(solver):
     """The mechanism's straight-line per-sample code, traced once and shared by its solvers;
-    None for redundant actuation (its projection is iterative: the general path serves it)."""
+    None for redundant actuation (its projection is iterative: the general path serves it)
+    and above TRACE_BUDGET."""
     m = solver.mechanism
-    if m.is_redundant:
+    if m.is_redundant or len(m.links) * len(m.active_joints) > TRACE_BUDGET:
         return None
     program = getattr(m, '_sample_program', None)
     if program is None:
