@@ -554,12 +554,29 @@ def known_bug(name, method, args, kwargs):
                   'equation_of_motion') and isinstance(q, np.ndarray) and q.ndim == 2 \
             and q.shape[0] == 0:
         return 'empty_batch'
-    if method == 'sample_torques' and any(isinstance(a, np.ndarray) or isinstance(a, np.generic)
-                                          for a in args):
+    if method == 'sample_torques' and any(np.ndim(_shape_probe(a)) >= 2 for a in args):
+        return 'sample_torques_batch'
+    if method == 'sample_torques' and any(_has_numpy(a) for a in args):
         return 'sample_torques_numpy'
     if any(_huge_longdouble(a) for a in args):
         return 'longdouble_overflow'
     return None
+
+
+def _shape_probe(value):
+    """``value`` as an array when numpy can make a rectangular one, else a scalar."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')
+            return np.asarray(value, dtype=float)
+    except Exception:   # noqa: BLE001
+        return 0.0
+
+
+def _has_numpy(value):
+    if isinstance(value, (list, tuple)):
+        return any(_has_numpy(v) for v in value)
+    return isinstance(value, (np.ndarray, np.generic))
 
 
 def _huge_longdouble(value):
@@ -576,9 +593,12 @@ def _huge_longdouble(value):
 #: bugs found by this fuzzer and not fixed at the time of writing (docs/reliability.md)
 KNOWN_BUGS = {
     'empty_batch': 'IndexError from _solve_batch for a (0, M) batch of positions',
-    'sample_torques_numpy': 'sample_torques on numpy arrays: numpy RuntimeWarnings on overflow '
-                            '(numpy scalars in the straight-line code) and complex torques '
-                            'returned for a complex qd',
+    'sample_torques_numpy': 'sample_torques with numpy arrays or scalars: the straight-line code '
+                            'computes with numpy scalars, so np.float16/np.float32 torques come '
+                            'back (float16 precision: -0.2035 for -0.2031), numpy '
+                            'RuntimeWarnings on overflow, complex torques for a complex qd',
+    'sample_torques_batch': 'sample_torques accepts an (N, M) batch and returns a list of lists '
+                            '([] for N = 0) instead of refusing it as malformed',
     'longdouble_overflow': 'a finite np.longdouble beyond the double range: numpy '
                            "RuntimeWarning 'overflow encountered in cast', then reported as "
                            "non_finite ('is inf') instead of out_of_range",
@@ -601,10 +621,22 @@ def test_api_known_bug_empty_batch(method):
 
 
 @pytest.mark.xfail(strict=False, reason=KNOWN_BUGS['sample_torques_numpy'])
-@pytest.mark.parametrize('qd', [np.array([-5.5e192, -5.5e192]), np.array([0.1 + 1j, 0.2])],
-                         ids=['huge', 'complex'])
-def test_api_known_bug_sample_torques_numpy(qd):
-    check_api_call('five_bar', 'sample_torques', [[2.0, 1.14], qd, [0.0, 0.0]], {})
+@pytest.mark.parametrize('qd, qdd', [(np.array([-5.5e192, -5.5e192]), [0.0, 0.0]),
+                                     (np.array([0.1 + 1j, 0.2]), [0.0, 0.0]),
+                                     ([0.0, 0.0], [np.float16(0.2), 0.0]),
+                                     ([0.0, 0.0], np.array([0.2, 0.0], np.float32))],
+                         ids=['huge', 'complex', 'float16', 'float32'])
+def test_api_known_bug_sample_torques_numpy(qd, qdd):
+    check_api_call('five_bar', 'sample_torques', [np.array([2.0, 1.14]), qd, qdd], {})
+
+
+@pytest.mark.xfail(strict=False, reason=KNOWN_BUGS['sample_torques_batch'])
+@pytest.mark.parametrize('rows', [1, 0])
+def test_api_known_bug_sample_torques_batch(rows):
+    solver = cog_id_ros.InverseDynamics(mechanism('paper_four_bar_a'))
+    batch, rates = ([[1.6]], [[0.0]]) if rows else (np.zeros((0, 1)), np.zeros((0, 1)))
+    with pytest.raises(cog_id_ros.SetpointError):
+        solver.sample_torques(batch, rates, rates)
 
 
 @pytest.mark.xfail(strict=False, reason=KNOWN_BUGS['longdouble_overflow'])
