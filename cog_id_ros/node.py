@@ -799,7 +799,8 @@ class TrajectoryWorker:
         self.config = config
         self.on_done = on_done
         self._cond = threading.Condition()
-        self._pending = None
+        self._next = None        # taken next, never replaced (it came while nothing was solved)
+        self._pending = None     # the one that waits; a newer one replaces it
         self.busy = False
         self._stopping = False
         self._process = self._conn = None
@@ -810,16 +811,23 @@ class TrajectoryWorker:
         self._thread.start()
 
     def submit(self, raw):
-        """Queue ``raw`` (a serialized JointTrajectory); returns the one it replaced, or None."""
+        """Queue ``raw`` (a serialized JointTrajectory); returns the one it replaced, or None.
+
+        A trajectory that arrives while none is solved or waiting is solved next, whatever
+        comes after it; otherwise it waits, replacing the one that waited.
+        """
         with self._cond:
-            replaced, self._pending = self._pending, raw
+            if not self.busy and self._next is None and self._pending is None:
+                self._next, replaced = raw, None
+            else:
+                replaced, self._pending = self._pending, raw
             self._cond.notify()
         return replaced
 
     def stop(self, timeout=5.0):
         with self._cond:
             self._stopping = True
-            self._pending = None
+            self._next = self._pending = None
             self._cond.notify()
         self._end_process(timeout)
         if self._thread.is_alive():
@@ -857,18 +865,22 @@ class TrajectoryWorker:
     def _run(self):
         while True:
             with self._cond:
-                while self._pending is None and not self._stopping:
+                while self._next is None and self._pending is None and not self._stopping:
                     self._cond.wait()
                 if self._stopping:
                     return
-                raw, self._pending = self._pending, None
+                if self._next is not None:
+                    raw, self._next = self._next, None
+                else:
+                    raw, self._pending = self._pending, None
                 self.busy = True
             try:
                 result = self._solve(raw)
             except Exception as exc:   # noqa: BLE001 (the worker thread must go on)
                 result = ('internal', f'{type(exc).__name__}: {exc}')
             finally:
-                self.busy = False
+                with self._cond:
+                    self.busy = False
             if not self._stopping:
                 self.on_done(result)
 
