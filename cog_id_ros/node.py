@@ -463,10 +463,11 @@ class CogIdNode(Node):
         try:
             received, v = setpoint_arrays(msg, self.selector)
             stamp = stamp_to_ns(msg.header.stamp)
-            now = self.get_clock().now().nanoseconds
             if not stamp:
-                stamp = now
-            elif stamp - now > self.max_stamp_lead_ns:
+                stamp = self.get_clock().now().nanoseconds
+            elif self.max_stamp_lead_ns != math.inf and \
+                    0 < (now := self.get_clock().now().nanoseconds) < stamp - self.max_stamp_lead_ns:
+                # (a clock at 0 has not started: use_sim_time before the first /clock)
                 raise Rejected('stamp', f'stamp {stamp / NANOSECONDS:.9f} is '
                                f'{(stamp - now) / NANOSECONDS:.6g} s ahead of the node\'s clock '
                                f'(max_stamp_lead {self.max_stamp_lead_ns / NANOSECONDS:g} s): '
