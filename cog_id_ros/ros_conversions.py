@@ -274,7 +274,9 @@ def solve_trajectory_message(raw, solver, selector, *, unwrap=None, max_step=Non
                                        f'({max_points})')
         _, q, qd, qdd = trajectory_arrays(msg, selector, unwrap, max_step)
         solver.reset()
-        result = solver.evaluate(q, qd, qdd, on_invalid='skip')
+        # solved at the unwrapped positions (the same poses, and the solver's continuation
+        # from point to point never crosses a wrap); answered with the positions received
+        result = solver.evaluate(unwrapped_columns(q, unwrap), qd, qdd, on_invalid='skip')
         if not result.valid.all():
             k = int(np.flatnonzero(~result.valid)[0])
             bad = rejection(result.errors[k])

@@ -25,3 +25,36 @@ def test_an_error_without_a_known_reason_is_solver():
     """Reliability mapping: anything else the solver raises is 'solver'."""
     assert rejection(RuntimeError('boom')).reason == 'solver'
     assert {'out_of_range', 'unreachable', 'jump'} <= set(REASONS)
+
+
+def test_a_wrapped_trajectory_is_unwrapped_before_it_is_differentiated():
+    """Reliability item 11 (trajectories): a revolute position reported in another 2 pi
+    range mid-trajectory was differentiated as a jump of 2 pi (huge torques); it is
+    unwrapped first, answered with the positions as received, and without unwrapping
+    the step is refused as 'jump'."""
+    import math
+
+    import numpy as np
+    from rclpy.serialization import deserialize_message, serialize_message
+    from trajectory_msgs.msg import JointTrajectory
+
+    import cog_id_ros
+    from cog_id_ros.ros_conversions import JointSelector, Rejected, solve_trajectory_message
+    from test_node import make_trajectory
+
+    mech = cog_id_ros.Mechanism.from_params_file('config/paper_four_bar_a.yaml')
+    t = np.arange(201) * 0.01
+    th = 1.4 + 0.01 * t
+    reported = np.where(t > 1.0, th - 2 * math.pi, th)
+    raw = serialize_message(make_trajectory(['joint3'], reported[:, None], times=t))
+    solver = cog_id_ros.InverseDynamics(mech)
+    out, _, points = solve_trajectory_message(raw, solver, JointSelector(['joint3']),
+                                              unwrap=[True], max_step=[1.0])
+    answer = deserialize_message(out, JointTrajectory)
+    effort = np.array([p.effort[0] for p in answer.points])
+    np.testing.assert_allclose(effort, 9.81 * np.cos(th), atol=1e-6)   # 2 m g L cos, at rest
+    assert answer.points[150].positions[0] == pytest.approx(reported[150])
+    with pytest.raises(Rejected) as info:
+        solve_trajectory_message(raw, solver, JointSelector(['joint3']), unwrap=[False],
+                                 max_step=[1.0])
+    assert info.value.reason == 'jump'
