@@ -305,3 +305,26 @@ def test_a_second_trajectory_waits_and_a_third_replaces_it(ros_process, probe_fo
     assert [len(m.points) for m in probe.effort_trajectories] == [30_000, 5]
     kv = wait_values(probe, lambda kv: kv['trajectories_rejected.busy'] != '0')
     assert kv['trajectories_rejected.busy'] == '1'
+
+
+def test_an_exception_in_a_timer_callback_is_counted_not_raised(rclpy_context):
+    """Reliability item 1: an exception in a timer callback (diagnostics, timeout) went out
+    of executor.spin() and ended the node; now it is counted in internal_errors and
+    logged, and the callback returns."""
+    from rclpy.parameter import Parameter
+
+    from cog_id_ros.node import CogIdNode
+    from mechanisms import from_yaml
+
+    overrides = [Parameter(name, value=value) for name, value in from_yaml(CONFIG_A).items()]
+    node = CogIdNode(context=rclpy_context, parameter_overrides=overrides, namespace='/unit')
+    try:
+        def broken(*args):
+            raise ZeroDivisionError('a bug')
+        node.closure_health = broken
+        node.publish_diagnostics()
+        node._check_timeout = broken
+        node.check_timeout()
+        assert node.counts['internal_errors'] == 2
+    finally:
+        node.destroy_node()
