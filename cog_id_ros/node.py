@@ -1083,15 +1083,16 @@ def _flat(params, prefix=''):
 
 
 def _rcl_value_problem(value):
-    """Why rcl's parameter parser would refuse ``value`` (from PyYAML), or None."""
-    if value is None:
-        return 'has no value'
-    if not isinstance(value, list):
+    """Why rcl's parameter parser would refuse ``value`` (from PyYAML), or None.
+
+    Only what rcl is known to refuse (arrays of mixed types); anything else rcl refuses
+    is named by its line (:func:`_rcl_message`).
+    """
+    if not isinstance(value, list) or not all(
+            isinstance(item, (bool, int, float, str)) for item in value):
         return None
     kinds = set()
     for item in value:
-        if isinstance(item, (list, dict)) or item is None:
-            return f'an array may hold numbers, booleans or strings only, got {value!r}'
         kinds.add(bool if isinstance(item, bool) else int if isinstance(item, int)
                   else float if isinstance(item, float) else str)
     if kinds == {int, float}:
@@ -1103,10 +1104,47 @@ def _rcl_value_problem(value):
 
 
 def _rcl_message(exc):
-    """rcl's message for a command line it refused, in one line without its source lines."""
+    """rcl's message for a command line it refused, in one line without its source lines;
+    a parse error in a params file names the parameter at the line rcl names."""
     text = _one_line(exc)
     text = text.replace('failed to initialize rcl: ', '')
-    return re.sub(r',? at /\S+:\d+', '', text)
+    text = re.sub(r',? at /\S+:\d+', '', text)
+    found = re.search(r"params file: '--params-file (.+?)'.*?line(?:_num)? (\d+)", text)
+    if found:
+        name = _parameter_at_line(found.group(1), int(found.group(2)))
+        if name:
+            return f'{name}: {text}'
+    return text
+
+
+def _parameter_at_line(path, line):
+    """The dotted name (below ros__parameters) of the entry at ``line`` (1-based) of a
+    params file, or None."""
+    try:
+        with open(path, encoding='utf-8') as stream:
+            root = yaml.compose(stream)
+    except (OSError, yaml.YAMLError):
+        return None
+    best = None
+
+    def walk(node, prefix):
+        nonlocal best
+        if not isinstance(node, yaml.MappingNode):
+            return
+        for key, value in node.value:
+            name = f'{prefix}{key.value}'
+            if key.start_mark.line + 1 <= line <= max(value.end_mark.line + 1,
+                                                     key.start_mark.line + 1):
+                best = name
+                walk(value, name + '.')
+
+    if isinstance(root, yaml.MappingNode):
+        for _, body in root.value:
+            if isinstance(body, yaml.MappingNode):
+                for key, params in body.value:
+                    if key.value == 'ros__parameters':
+                        walk(params, '')
+    return best
 
 
 class _stderr_held:

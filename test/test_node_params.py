@@ -218,3 +218,19 @@ def test_unknown_node_parameter_is_a_warning_not_an_error(tmp_path, ros_env):
     assert proc.returncode == 0, out
     assert "ignoring unknown parameter 'setpoint_timout'" in lines[0]
     assert "mechanism 'paper_four_bar_a'" in lines[1]
+
+
+def test_an_rcl_parse_error_the_node_cannot_foresee_names_the_parameter_at_its_line(
+        tmp_path, ros_env):
+    """Reliability item 22: a key without a value ('No value at line N' from rcl) gave two
+    lines naming a line; now one line names the parameter at that line, and the file."""
+    text = open(CONFIG_A, encoding='utf-8').read()
+    path = tmp_path / 'novalue.yaml'
+    path.write_text(text.replace('      name: paper_four_bar_a\n', '      name:\n'))
+    assert '      name:\n' in path.read_text()
+    result = run_node(ros_env, '--params-file', str(path), timeout=30)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith('cog_id_node: cannot start: mechanism.name: ')
+    assert str(path) in lines[0]
