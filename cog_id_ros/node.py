@@ -826,11 +826,13 @@ class TrajectoryWorker:
         return replaced
 
     def stop(self, timeout=5.0):
+        """End the process (at once if it is solving: nobody waits for its answer) and
+        the thread."""
         with self._cond:
             self._stopping = True
             self._next = self._pending = None
             self._cond.notify()
-        self._end_process(timeout)
+        self._end_process(0.2 if self.busy else timeout)
         if self._thread.is_alive():
             self._thread.join(timeout)
 
