@@ -328,3 +328,25 @@ def test_an_exception_in_a_timer_callback_is_counted_not_raised(rclpy_context):
         assert node.counts['internal_errors'] == 2
     finally:
         node.destroy_node()
+
+
+def test_a_killed_trajectory_process_is_replaced(ros_process, probe_for):
+    """Reliability item 9: trajectories are solved in a process of their own; if it dies
+    (killed, out of memory) the node goes on and the next trajectory is answered by a
+    new one."""
+    import os
+    import signal as signals
+    import subprocess
+
+    proc = start(ros_process, '/killed')
+    probe = probe_for('/killed')
+    children = subprocess.run(['pgrep', '-P', str(proc.proc.pid)], capture_output=True,
+                              text=True).stdout.split()
+    assert children, 'no trajectory process'
+    for pid in children:
+        os.kill(int(pid), signals.SIGKILL)
+    time.sleep(0.5)
+    q = np.full((6, 1), 1.4)
+    probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
+    assert wait_until(lambda: probe.effort_trajectories, timeout=60), proc.output
+    assert proc.proc.poll() is None
