@@ -325,6 +325,11 @@ class CogIdNode(Node):
         except (rclpy.exceptions.ParameterException, RuntimeError, TypeError, ValueError) as exc:
             raise MechanismConfigError(
                 'qos_overrides', f'cannot be honoured: {_one_line(exc)}') from None
+        for name in sorted(overrides):
+            if name.startswith('qos_overrides.') and not self.has_parameter(name):
+                self.get_logger().warning(
+                    f"ignoring unknown parameter '{name}' (no topic of the node by that "
+                    'fully qualified name)')
         self.trajectory_worker = TrajectoryWorker(
             {'mechanism': dict(mech.parameters), 'active_joints': self.active_joints,
              'unwrap': self.unwrap, 'max_step': self.max_step.tolist(),
