@@ -1068,11 +1068,11 @@ def params_file_problem(argv):
             what = getattr(exc, 'problem', None) or 'syntax error'
             return f'--params-file {path}: not valid YAML{line}: {what}'
         if not isinstance(document, dict):
-            return f'--params-file {path}: holds no node entries (/**: ros__parameters: ...)'
-        for entry, body in document.items():
+            continue                # rcl says what it thinks of it
+        for body in document.values():
             params = body.get('ros__parameters') if isinstance(body, dict) else None
             if not isinstance(params, dict):
-                return f"--params-file {path}: entry '{entry}' has no ros__parameters mapping"
+                continue
             for name, value in _flat(params):
                 problem = _rcl_value_problem(value)
                 if problem:
