@@ -1046,6 +1046,7 @@ def _spin(executor, node):
             if not rclpy.ok():
                 raise
             node.internal_error('executor', exc)
+            time.sleep(0.01)   # an error that repeats must not turn into a busy loop
 
 
 def params_file_problem(argv):
