@@ -40,7 +40,7 @@ def kind_of(exc):
     if isinstance(exc, AssertionError):
         text = str(exc).split('\n')[0]
         text = re.sub(r'[-+]?\d[\d.e+-]*', 'N', text)
-        return 'contract: ' + text[:120]
+        return 'contract: ' + (text if len(text) <= 160 else text[:50] + ' ... ' + text[-110:])
     tb = traceback.extract_tb(exc.__traceback__)
     where = next((f'{os.path.basename(f.filename)}:{f.lineno}' for f in reversed(tb)
                   if 'cog_id_ros' in f.filename), '?')
