@@ -804,6 +804,7 @@ def check_node_start(text, directory, env, timeout=20.0):
             status = proc.wait(timeout=15)
         except subprocess.TimeoutExpired:
             proc.kill()
+            proc.wait()
             raise AssertionError('cog_id_node did not stop on SIGINT within 15 s') from None
         output = read()
         assert status == 0, f'exit status {status} after SIGINT:\n{output[-2000:]}'
