@@ -25,10 +25,12 @@ QoS: every topic but ``/diagnostics`` is reliable, keep-last, volatile, depth
 rclpy's QoS override parameters, e.g.
 ``-p qos_overrides./joint_setpoint.subscription.depth:=1``). See docs/node.md for why.
 
-Parameters: the mechanism (``mechanism.*``, ``links.*``, ``joints.*``; see
-shared/design/mechanism-params.md) and the node's own, ``NODE_PARAMETERS`` below. All are
-read once at start-up and are read-only afterwards. A parameter that cannot be honoured
-ends the process with exit status 2 and one line naming the parameter.
+Parameters: the mechanism (``mechanism.*``, ``links.*``, ``joints.*``; see the README's
+mechanism parameter file section) and the node's own, ``NODE_PARAMETERS`` below (bounds in
+``PARAMETER_BOUNDS``). All are read once at start-up and are read-only afterwards,
+``use_sim_time`` included. A parameter that cannot be honoured (or a params file rcl cannot
+parse) ends the process with exit status 2 and one line naming the parameter.
+``cog_id_node --help`` prints the usage. Diagnostics keys: ``DIAGNOSTIC_KEYS``.
 
 Threads: ``joint_setpoint`` is served by a thread of its own (:mod:`cog_id_ros.setpoint_loop`),
 trajectories by a thread and a process of their own (:class:`TrajectoryWorker`), everything
