@@ -606,6 +606,11 @@ KNOWN_BUGS = {
     'inertia_symmetry_overflow': 'a 3x3 inertia with huge off-diagonal entries: numpy '
                                  "RuntimeWarning 'overflow encountered in subtract' from the "
                                  'symmetry check (np.allclose) before the range check refuses it',
+    'sigint_at_start_up': "cog_id_node: a SIGINT sent as soon as the node logs its 'mechanism' "
+                          'line (the rest of start-up: executor, gc.freeze, setpoint thread, '
+                          'trajectory process, signal hand-over) is sometimes lost: the node '
+                          'spins on (main thread in executor.spin) until a second signal; '
+                          'about 1 start in 4 under pytest on the 2-core VM',
     'longdouble_overflow': 'a finite np.longdouble beyond the double range: numpy '
                            "RuntimeWarning 'overflow encountered in cast', then reported as "
                            "non_finite ('is inf') instead of out_of_range",
@@ -771,7 +776,37 @@ def test_params_file_paths(path):
     check_load(lambda: cog_id_ros.Mechanism.from_params_file(path), f'from_params_file({path!r})')
 
 
-def check_node_start(text, directory, env, timeout=20.0):
+def _process_state(pid):
+    """What a hung process and its children are doing (from /proc), for a failure message."""
+    out = []
+    pids = [pid]
+    try:
+        for tid in os.listdir(f'/proc/{pid}/task'):
+            with open(f'/proc/{pid}/task/{tid}/children') as f:
+                pids += [int(x) for x in f.read().split()]
+    except OSError:
+        pass
+    for p in pids:
+        try:
+            with open(f'/proc/{p}/cmdline', 'rb') as f:
+                cmd = f.read().replace(b'\0', b' ').decode(errors='replace')[:120]
+            with open(f'/proc/{p}/status') as f:
+                status = {k: v.strip() for k, v in (line.split(':', 1) for line in f if ':' in line)}
+            threads = []
+            for tid in sorted(os.listdir(f'/proc/{p}/task')):
+                with open(f'/proc/{p}/task/{tid}/comm') as f:
+                    name = f.read().strip()
+                with open(f'/proc/{p}/task/{tid}/wchan') as f:
+                    threads.append(f'{name}:{f.read().strip()}')
+            out.append(f'pid {p} [{cmd}] state {status.get("State")} SigBlk {status.get("SigBlk")} '
+                       f'SigIgn {status.get("SigIgn")} SigCgt {status.get("SigCgt")} '
+                       f'threads {threads}')
+        except OSError as exc:
+            out.append(f'pid {p}: {exc}')
+    return '; '.join(out)
+
+
+def check_node_start(text, directory, env, timeout=20.0, settle=1.0):
     """cog_id_node on params file ``text``: starts (then SIGINT -> 0) or exits 2 with one
     'cannot start' line; never a traceback. Returns 'started' or 'refused'."""
     path = os.path.join(directory, 'node_fuzz.yaml')
@@ -780,7 +815,8 @@ def check_node_start(text, directory, env, timeout=20.0):
     exe = os.path.join(os.path.dirname(sys.executable), 'cog_id_node')
     log_path = os.path.join(directory, 'node_fuzz.log')
     with open(log_path, 'w') as log:
-        proc = subprocess.Popen([exe, '--ros-args', '--params-file', path], env=env, cwd=REPO,
+        proc = subprocess.Popen([exe, '--ros-args', '--params-file', path],
+                                env=dict(env, PYTHONFAULTHANDLER='1'), cwd=REPO,
                                 stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
 
     def read():
@@ -799,13 +835,22 @@ def check_node_start(text, directory, env, timeout=20.0):
             proc.kill()
             proc.wait()
             raise AssertionError(f'cog_id_node neither started nor refused within {timeout:g} s')
+        # SIGINT once start-up is over (``settle`` s after the line): a SIGINT during the
+        # end of start-up is sometimes lost (KNOWN_BUGS['sigint_at_start_up'])
+        time.sleep(settle)
         proc.send_signal(signal.SIGINT)
         try:
             status = proc.wait(timeout=15)
         except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-            raise AssertionError('cog_id_node did not stop on SIGINT within 15 s') from None
+            state = _process_state(proc.pid)
+            proc.send_signal(signal.SIGABRT)     # faulthandler prints every thread's stack
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            raise AssertionError(f'cog_id_node did not stop on SIGINT within 15 s; {state}; '
+                                 f'its output:\n{read()[-12000:]}') from None
         output = read()
         assert status == 0, f'exit status {status} after SIGINT:\n{output[-2000:]}'
         assert 'Traceback' not in output, output[-3000:]
@@ -832,6 +877,14 @@ def test_node_start_up_on_any_params_file(ros_env, tmp_path_factory, text):
     """cog_id_node on a fuzzed params file starts (and stops with 0 on SIGINT) or exits with
     status 2 and one 'cannot start' line: never a traceback, never a hang."""
     check_node_start(text, str(tmp_path_factory.getbasetemp()), ros_env)
+
+
+@pytest.mark.xfail(strict=False, reason=KNOWN_BUGS['sigint_at_start_up'])
+def test_node_known_bug_sigint_at_start_up(ros_env, tmp_path_factory):
+    """SIGINT right after the 'mechanism' line, three starts: each must exit 0."""
+    text = _config_text('paper_four_bar_b.yaml')
+    for _ in range(3):
+        check_node_start(text, str(tmp_path_factory.getbasetemp()), ros_env, settle=0.0)
 
 
 # --- the tests: the node ------------------------------------------------------------------------
