@@ -42,7 +42,7 @@ STOP_SIGNALS = ('SIGINT', 'SIGTERM', 'SIGHUP')
 #: largest change of an active position between consecutive rows, per row (not per
 #: second): a crank wrapping from +pi to -pi jumps by ~2 pi in one row at any sample rate,
 #: and the solver follows the mechanism from row to row, which is a per-row matter too
-DEFAULT_MAX_STEP = 0.5            # rad, revolute joints
+DEFAULT_MAX_STEP = 1.0            # rad, revolute joints (the node's max_setpoint_step too)
 DEFAULT_MAX_STEP_LINEAR = 0.1     # m, prismatic joints
 TRACEBACK_ENV = 'COG_ID_TORQUES_TRACEBACK'
 

@@ -89,7 +89,7 @@ def test_skip_invalid_skips_a_jump_with_reason_jump(tmp_path):
     t = np.arange(200) * 1e-3
     theta, dtheta, ddtheta = target(t)
     glitch = theta.copy()
-    glitch[57] += 1.0                                   # row 58: one wild encoder reading
+    glitch[57] += 2.0                                   # row 58: one wild encoder reading
     src = write_csv(tmp_path / 'traj.csv', {'time': t, 'joint3.position': glitch,
                                             'joint3.velocity': dtheta,
                                             'joint3.acceleration': ddtheta})
@@ -99,8 +99,8 @@ def test_skip_invalid_skips_a_jump_with_reason_jump(tmp_path):
     s = strict_json(proc.stdout)
     assert s['skipped_rows'] == [58] and s['skipped_reasons'] == {'jump': 1}
     assert s['skipped_row_reasons'] == ['jump'] and s['solved'] == 199
-    assert "row 58 (line 59 of the file): column 'joint3.position': jumps by 1.0" in proc.stderr
-    assert 'from row 57 (limit 0.5 rad per row, --max-step)' in proc.stderr
+    assert "row 58 (line 59 of the file): column 'joint3.position': jumps by 2.0" in proc.stderr
+    assert 'from row 57 (limit 1 rad per row, --max-step)' in proc.stderr
     _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
     assert np.isnan(tau[57, 0])
     keep = np.arange(200) != 57
@@ -510,7 +510,7 @@ def test_help_documents_the_new_options_and_statuses(tmp_path):
     proc = run_tool('--help', cwd=tmp_path)
     assert proc.returncode == 0
     text = ' '.join(proc.stdout.split())
-    for words in ('--unwrap', '--max-step RAD', '--max-step-linear M', 'default 0.5 rad',
+    for words in ('--unwrap', '--max-step RAD', '--max-step-linear M', 'default 1.0 rad',
                   'default 0.1 m', "reason 'jump'", 'per row, not per second',
                   'a FIFO, device or socket is refused', '143 SIGTERM', '129 SIGHUP',
                   '1e-09 .. 1e+09 s', 'null in the JSON'):
