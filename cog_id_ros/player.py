@@ -212,7 +212,12 @@ def main(argv=None):
                 print(f'cog_id_player: no effort came back on {args.effort_topic}',
                       file=sys.stderr)
                 return 1
-            trajectory_io.write_efforts(args.output, times, efforts, found, names)
+            try:
+                trajectory_io.write_efforts(args.output, times, efforts, found, names)
+            except OSError as exc:     # also a FIFO or device refused as --output
+                print(f'cog_id_player: --output {args.output}: cannot write: '
+                      f'{exc.strerror or exc}', file=sys.stderr)
+                return 4
             print(f'cog_id_player: {int(found.sum())} of {len(stamps)} efforts recorded to '
                   f'{args.output}', file=sys.stderr)
     except KeyboardInterrupt:
