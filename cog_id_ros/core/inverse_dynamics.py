@@ -154,17 +154,22 @@ class InverseDynamics:
         wrong). This is what cog_id_node calls for every setpoint.
         """
         program = self._program
-        if program is not None and program.step is not None:
-            try:
-                n = len(self.mechanism.active_joints)
-                if len(q) == len(qd) == len(qdd) == n:
-                    done = program.step(self._state, q, qd, qdd, self._limits, self._bounds)
-                    if done is not None:
-                        self._state = done[1]
-                        return done[0]
-            except (TypeError, ValueError, OverflowError, LookupError):
-                pass                 # not a list of floats: torques() reports what is wrong
-        return self.torques(q, qd, qdd).tolist()
+        if program is not None and program.step is not None and \
+                _floats(q) and _floats(qd) and _floats(qdd):
+            n = len(self.mechanism.active_joints)
+            if len(q) == len(qd) == len(qdd) == n:
+                done = program.step(self._state, q, qd, qdd, self._limits, self._bounds)
+                if done is not None:
+                    self._state = done[1]
+                    return done[0]
+        sample = self._one_sample(q, qd, qdd)
+        if sample is not None:
+            return self._serve_one(*sample)
+        q, qd, qdd, single = self._inputs(q, qd, qdd)
+        if not single:
+            raise SetpointError(f'sample_torques takes one sample (one number per active '
+                                f'joint), got shape {q.shape}: use torques() for a batch')
+        return self.torques(q[0], qd[0], qdd[0]).tolist()    # reports what is wrong
 
     def evaluate(self, q, qd=None, qdd=None, on_invalid='raise'):
         """Torques with per-sample status (an Evaluation). on_invalid='skip' marks samples that
@@ -353,48 +358,55 @@ class InverseDynamics:
     def _serve_one(self, target, qd, qdd, sample=None):
         """Torques of one well-formed sample (lists of floats); the warm start moves on only
         when they are served (finite)."""
-        done = self._program_serial(target, qd, qdd, sample)
-        if done is None:
-            step, state = self._solve_serial(target, sample)
-            tau = self._torques(step, qd, qdd, sp.ScalarOps)
-        else:
-            tau, state = done
+        tau, state = self._solve_one(target, qd, qdd, sample)
         if not all(map(math.isfinite, tau)):
             raise _out_of_range(qd, qdd, sample)
         self._state = state
         return tau
 
-    def _solve_serial(self, target, sample=None):
-        """(closure step, new state) at ``target`` by continuation from the warm start, on
-        the general lane path; raises the error of the first step that cannot be served.
-        The warm start itself is not changed."""
-        def solve(predicted, goal, final):
-            step = self._closure_step(predicted, goal, sp.ScalarOps)
-            self._check(step, final, sample)
-            return step, (step.sol.q, step.basis)
-        return self._follow(target, solve, sample)
-
-    def _program_serial(self, target, qd, qdd, sample=None):
-        """(torques, new state) at ``target`` by the straight-line code (sample_program.py),
-        through the same continuation steps as _solve_serial; None when it cannot serve a
-        step (the general path then decides). The warm start is not changed."""
+    def _solve_one(self, target, qd, qdd, sample=None):
+        """(torques, new state) at ``target`` by continuation from the warm start; raises
+        the error of the first step that cannot be served. The warm start is not changed."""
         program = self._program
-        if program is None:
-            return None
-        if program.step is not None:    # the usual sample: one step, one or two Newton steps
+        if program is not None and program.step is not None:
+            # the usual sample at control rate: one step, closed in one or two Newton steps
             done = program.step(self._state, target, qd, qdd, self._limits, self._bounds)
             if done is not None:
                 return done
+        (kind, payload), state = self._follow(target, self._step_solver(qd, qdd, sample), sample)
+        if kind == 'program':
+            return payload, state
+        return self._torques(payload, qd, qdd, sp.ScalarOps), state
+
+    def _solve_serial(self, target, sample=None, want_step=True):
+        """(closure step, new state) at ``target`` by continuation from the warm start; the
+        step is None unless ``want_step``. Raises the error of the first step that cannot be
+        served. The warm start is not changed."""
+        zeros = [0.0] * len(target)
+        (kind, payload), state = self._follow(target, self._step_solver(zeros, zeros, sample),
+                                              sample)
+        if kind == 'general' or not want_step:
+            return (payload if kind == 'general' else None), state
+        sol = closure.evaluate(self.mechanism.model, list(state[0]), self.mechanism.free_joints,
+                               sp.ScalarOps)
+        sol.converged, sol.iterations = True, 0
+        return _Step(sol, state[1], 0.0, sol.lsq.condition_number()), state
+
+    def _step_solver(self, qd, qdd, sample):
+        """The ``solve`` of :meth:`_follow`: one continuation step by the straight-line code
+        (sample_program.py) where it can decide, else by the general lane path, which raises
+        the right error. Returns (('program', torques) or ('general', closure step), state)."""
+        program = self._program
 
         def solve(predicted, goal, final):
-            done = program.solve(predicted, qd, qdd)
-            if done is None:
-                raise _HandOver
-            return done
-        try:
-            return self._follow(target, solve, sample)
-        except _HandOver:
-            return None
+            if program is not None:
+                done = program.solve(predicted, qd, qdd)
+                if done is not None:
+                    return ('program', done[0]), done[1]
+            step = self._closure_step(predicted, goal, sp.ScalarOps, SERIAL_NEWTON_ITERATIONS)
+            self._check(step, final, sample)
+            return ('general', step), (step.sol.q, step.basis)
+        return solve
 
     def _follow(self, target, solve, sample):
         """Continuation from the warm start to ``target`` (rules in continuation.py).
@@ -450,21 +462,18 @@ class InverseDynamics:
         raise _unreachable(m, start, target, sample, f'not reached in {MAX_STEPS} continuation steps')
 
     def _serial_positions(self, target, sample):
-        """Every joint coordinate at one sample (as _solve_serial), by the straight-line code
-        when it can serve the sample; the warm start moves there."""
-        zeros = [0.0] * len(target)
-        done = self._program_serial(target, zeros, zeros, sample)
-        state = self._solve_serial(target, sample)[1] if done is None else done[1]
-        self._state = state
-        return state[0]
+        """Every joint coordinate at one sample, by serial continuation; the warm start
+        moves there."""
+        self._state = self._solve_serial(target, sample, want_step=False)[1]
+        return self._state[0]
 
-    def _closure_step(self, predicted, target, ops):
+    def _closure_step(self, predicted, target, ops, max_iter=30):
         """Close the loops from the prediction ``predicted`` (primary actuators at their
         targets), moving the other joints; then, for redundant actuation, move to the
         nearest configuration (W^-1 metric) to the full ``target``."""
         m = self.mechanism
         sol = closure.solve_closure(m.model, list(predicted), m.free_joints, ops,
-                                    m.closure_tolerance)
+                                    m.closure_tolerance, max_iter=max_iter)
         basis = velocity_basis(m, sol)
         mismatch = 0.0
         if m.is_redundant:
@@ -524,6 +533,11 @@ class InverseDynamics:
         m = self.mechanism
         n = len(qa)
         start_state = self._state
+        if n == 0:
+            sol = closure.evaluate(m.model, [np.full(0, x) for x in start_state[0]],
+                                   m.free_joints, sp.ArrayOps)
+            step = _Step(sol, velocity_basis(m, sol), 0.0, sol.lsq.condition_number())
+            return step, np.zeros((0, len(m.joints))), np.zeros(0, bool), []
         invalid = np.zeros(n, bool) if invalid is None else invalid
         limits = np.array(self._limits)
         start = np.array([start_state[0][j] for j in m.active_index])
@@ -625,14 +639,15 @@ class InverseDynamics:
             self._state = previous
             before = positions[i].copy()
             try:
-                serial, _ = self._solve_serial(qa[i].tolist(), sample=i)
+                _, (solved, solved_basis) = self._solve_serial(qa[i].tolist(), sample=i,
+                                                               want_step=False)
             except CogIdError as exc:
                 errors[i], ok[i] = exc, False
                 if on_invalid == 'raise':
                     self._state = start_state
                     raise
             else:
-                positions[i], basis[i] = serial.sol.q, serial.basis
+                positions[i], basis[i] = solved, solved_basis
                 ok[i], redone, last_good = True, True, i
                 if np.max(np.abs(positions[i] - before)) <= 1e-9:
                     continue                    # the same pose: the samples after it stand
@@ -738,6 +753,11 @@ class InverseDynamics:
         return out
 
 
+def _floats(value):
+    """True for a list of Python floats (what a control loop passes at control rate)."""
+    return type(value) is list and all(type(x) is float for x in value)
+
+
 def _float_array(label, value, m):
     """``value`` as a float array; a plain number is one sample when m == 1. SetpointError
     (reason 'malformed') for strings, mappings, booleans, ragged or non-numeric input."""
@@ -752,7 +772,11 @@ def _float_array(label, value, m):
             raise TypeError(f'{raw.dtype} values')
         if raw.dtype.kind == 'O' and any(x is None for x in raw.ravel().tolist()):
             raise TypeError('None values')
-        array = raw.astype(float)
+        with np.errstate(over='raise'):
+            array = raw.astype(float)
+    except FloatingPointError:
+        raise SetpointError(f'{label}: a value beyond the range of a double',
+                            reason='out_of_range') from None
     except (TypeError, ValueError, OverflowError) as exc:
         raise SetpointError(f'{label}: must be numbers (one per active joint), not {exc}') from None
     if array.ndim == 0:
@@ -761,10 +785,6 @@ def _float_array(label, value, m):
                                 f'this mechanism has {m}: give one number per active joint')
         array = array.reshape(1)
     return array
-
-
-class _HandOver(Exception):
-    """The straight-line code cannot serve a step: the general path decides."""
 
 
 def _fmt(values):
@@ -791,6 +811,10 @@ def _out_of_range(qd, qdd, sample):
         f'accelerations (largest magnitude {largest:.3g}) are too large to compute with',
         sample=sample, reason='out_of_range')
 
+
+#: Newton iterations of one serial continuation step (from a first-order prediction within
+#: the step limits Newton converges in a few; more means the step is too long: it is halved)
+SERIAL_NEWTON_ITERATIONS = 12
 
 #: links x actuators above which the per-sample code is not traced: its size grows with
 #: that product (about 8 operations each) and tracing costs ~3 kB per operation, so a

@@ -421,15 +421,15 @@ def _inertia(r, name):
         matrix = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
     elif len(values) == 9:
         matrix = np.array(values).reshape(3, 3)
-        if not np.allclose(matrix, matrix.T, rtol=0.0, atol=1e-12 * max(1.0, np.abs(matrix).max())):
-            raise MechanismConfigError(name, f'must be symmetric, got {list(values)}')
     else:
         raise MechanismConfigError(
             name, f'must have 6 entries [ixx, iyy, izz, ixy, ixz, iyz], got {len(values)}')
     largest = float(np.abs(matrix).max())
-    if largest > MAX_INERTIA:
+    if largest > MAX_INERTIA:      # first: the checks below would overflow on huge entries
         raise MechanismConfigError(
             name, f'entries must lie within +-{MAX_INERTIA:g} kg m^2, got {largest!r}')
+    if not np.allclose(matrix, matrix.T, rtol=0.0, atol=1e-12 * max(1.0, largest)):
+        raise MechanismConfigError(name, f'must be symmetric, got {list(values)}')
     moments = np.linalg.eigvalsh(matrix)
     tol = 1e-9 * max(1e-12, np.abs(moments).max())
     if moments[0] < -tol:
