@@ -98,11 +98,15 @@ def prediction(mechanism, state, goal):
 
 
 def fits_one_step(mechanism, limits, state, target, moved):
-    """True when the move to ``target`` is one step: no actuator moves, and no joint is
-    predicted to move (``moved``, from :func:`prediction`), by more than its limit."""
+    """True when the move to ``target`` is one step: no primary actuator moves, and no joint
+    is predicted to move (``moved``, from :func:`prediction`), by more than its limit.
+
+    Only the ``dof`` primary actuators are moved by continuation; with redundant actuation
+    the others follow from the closure, and the projection takes care of their targets
+    (an inconsistent target would otherwise never be "reached")."""
     q = state[0]
-    for t, j in zip(target, mechanism.active_index):
-        if not abs(t - q[j]) <= limits[j]:
+    for a, j in zip(mechanism.primary, mechanism.primary_joints):
+        if not abs(target[a] - q[j]) <= limits[j]:
             return False
     for dx, lim in zip(moved, limits):
         if not abs(dx) <= lim:
@@ -114,7 +118,8 @@ def step_ratio(mechanism, limits, state, target, moved):
     """How many step limits the move to ``target`` is: the largest of |actuator motion| and
     |predicted joint motion| over the joints' limits."""
     q = state[0]
-    ratios = [abs(t - q[j]) / limits[j] for t, j in zip(target, mechanism.active_index)]
+    ratios = [abs(target[a] - q[j]) / limits[j]
+              for a, j in zip(mechanism.primary, mechanism.primary_joints)]
     ratios += [abs(dx) / lim for dx, lim in zip(moved, limits)]
     return max(ratios)
 
@@ -122,7 +127,8 @@ def step_ratio(mechanism, limits, state, target, moved):
 def actuator_ratio(mechanism, limits, state, target):
     """The actuators' share of :func:`step_ratio` (the steps a straight move needs at least)."""
     q = state[0]
-    return max(abs(t - q[j]) / limits[j] for t, j in zip(target, mechanism.active_index))
+    return max(abs(target[a] - q[j]) / limits[j]
+               for a, j in zip(mechanism.primary, mechanism.primary_joints))
 
 
 def correction_bounds(limits):

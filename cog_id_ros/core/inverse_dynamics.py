@@ -92,11 +92,14 @@ class Evaluation:
 
 
 class _Step:
-    """A solved configuration: closure solution, velocity basis, redundant mismatch, condition."""
-    __slots__ = ('sol', 'basis', 'mismatch', 'condition')
+    """A solved configuration: closure solution, velocity basis, redundant mismatch, condition,
+    and ``closed``: the coordinates where Newton closed the loops from the prediction (before
+    the projection of a redundant setpoint, which may move them by its inconsistency)."""
+    __slots__ = ('sol', 'basis', 'mismatch', 'condition', 'closed')
 
-    def __init__(self, sol, basis, mismatch, condition):
+    def __init__(self, sol, basis, mismatch, condition, closed=None):
         self.sol, self.basis, self.mismatch, self.condition = sol, basis, mismatch, condition
+        self.closed = sol.q if closed is None else closed
 
 
 class InverseDynamics:
@@ -395,25 +398,27 @@ class InverseDynamics:
     def _step_solver(self, qd, qdd, sample):
         """The ``solve`` of :meth:`_follow`: one continuation step by the straight-line code
         (sample_program.py) where it can decide, else by the general lane path, which raises
-        the right error. Returns (('program', torques) or ('general', closure step), state)."""
+        the right error. Returns (('program', torques) or ('general', closure step), state,
+        the coordinates Newton closed the loops at)."""
         program = self._program
 
         def solve(predicted, goal, final):
             if program is not None:
                 done = program.solve(predicted, qd, qdd)
                 if done is not None:
-                    return ('program', done[0]), done[1]
-            step = self._closure_step(predicted, goal, sp.ScalarOps, SERIAL_NEWTON_ITERATIONS)
+                    return ('program', done[0]), done[1], done[1][0]
+            step = self._closure_step(predicted, goal, sp.ScalarOps, SERIAL_NEWTON_ITERATIONS,
+                                      project=final)
             self._check(step, final, sample)
-            return ('general', step), (step.sol.q, step.basis)
+            return ('general', step), (step.sol.q, step.basis), step.closed
         return solve
 
     def _follow(self, target, solve, sample):
         """Continuation from the warm start to ``target`` (rules in continuation.py).
 
         ``solve(predicted, goal, final)`` closes the loops from a prediction and returns
-        (result, new state); it raises ClosureError when Newton fails there. Returns the
-        last (result, new state)."""
+        (result, new state, where Newton closed them); it raises ClosureError when Newton
+        fails there. Returns the last (result, new state)."""
         m, limits = self.mechanism, self._limits
         start = self._state
         state = wrapped_state(m, self._wrapping, start, target)
@@ -433,7 +438,7 @@ class InverseDynamics:
                     size, goal, final = cap, intermediate_goal(m, state, target, cap / ratio), False
                     predicted, _ = prediction(m, state, goal)
             try:
-                result, new_state = solve(predicted, goal, final)
+                result, new_state, corrected = solve(predicted, goal, final)
             except ClosureError as exc:
                 if final or exc.reason != 'closure' or cap < MIN_STEP:
                     if final:
@@ -448,7 +453,7 @@ class InverseDynamics:
                 raise _unreachable(m, start, target, sample,
                                    f'the way there passes a singular pose at {_fmt(goal)} '
                                    f'(condition number {exc.condition_number:.3g})') from None
-            if not correction_ok(new_state[0], predicted, self._bounds):
+            if not correction_ok(corrected, predicted, self._bounds):
                 if size / 2.0 < MIN_STEP:
                     raise _unreachable(m, start, target, sample,
                                        'the assembly branch cannot be followed there (Newton '
@@ -467,18 +472,19 @@ class InverseDynamics:
         self._state = self._solve_serial(target, sample, want_step=False)[1]
         return self._state[0]
 
-    def _closure_step(self, predicted, target, ops, max_iter=30):
+    def _closure_step(self, predicted, target, ops, max_iter=30, project=True):
         """Close the loops from the prediction ``predicted`` (primary actuators at their
-        targets), moving the other joints; then, for redundant actuation, move to the
-        nearest configuration (W^-1 metric) to the full ``target``."""
+        targets), moving the other joints; then, for redundant actuation and ``project``,
+        move to the nearest configuration (W^-1 metric) to the full ``target`` (only the
+        last step of a continuation does: the steps on the way follow the primaries)."""
         m = self.mechanism
         sol = closure.solve_closure(m.model, list(predicted), m.free_joints, ops,
                                     m.closure_tolerance, max_iter=max_iter)
         basis = velocity_basis(m, sol)
-        mismatch = 0.0
-        if m.is_redundant:
+        closed, mismatch = sol.q, 0.0
+        if m.is_redundant and project:
             sol, basis, mismatch = self._project_redundant(sol, basis, target, ops)
-        return _Step(sol, basis, mismatch, sol.lsq.condition_number())
+        return _Step(sol, basis, mismatch, sol.lsq.condition_number(), closed)
 
     def _project_redundant(self, sol, basis, target, ops, max_iter=6):
         """Gauss-Newton on min (q_a - target)^T W^-1 (q_a - target) over closed configurations."""
