@@ -136,3 +136,18 @@ def test_wrapped_encoder_angles_give_the_torques_of_the_unwrapped_motion():
     for a, b in zip(q, wrapped):
         assert s.sample_torques([a], [5.0], [0.0]) == pytest.approx(
             w.sample_torques([b], [5.0], [0.0]), rel=1e-7, abs=1e-9)
+
+
+@pytest.mark.parametrize('target', [[1.5707963267948966, 1.8207963267948966],
+                                    [2.5707963267948966, 1.5707963267948966]])
+def test_an_inconsistent_redundant_setpoint_is_refused_as_such_in_a_few_steps(target):
+    """Reliability items 6 and 19: only the primary actuators are followed by continuation,
+    so a redundant setpoint the closure cannot honour is 'inconsistent' at once, not walked
+    towards for the whole step budget and then called 'unreachable'."""
+    s = solver('paper_four_bar_b')
+    start = time.process_time()
+    with pytest.raises(cog_id_ros.ClosureError) as info:
+        s.torques(target)
+    assert info.value.reason == 'inconsistent'
+    assert time.process_time() - start < 0.5
+    assert np.isfinite(s.torques([1.6, 1.6])).all()
