@@ -529,11 +529,14 @@ def main(argv=None):
                 top.append(block.max())
             series[f'{ns} p99'] = (secs, p99)
             series[f'{ns} max'] = (secs, top)
-        publisher_gap = gaps_in(driver.sent[:driver.sent_count])[0] * 1e3
+        publisher_gap, publisher_gap_at = gaps_in(driver.sent[:driver.sent_count])
+        publisher_gap *= 1e3
+        publisher_gap_at -= t0
         report = {'date': started, 'commit': commit, 'cog_id_ros_modified': dirty,
                   'command': 'python bench/bench_soak.py ' + ' '.join(sys.argv[1:] if argv is None else argv),
                   'duration_s': args.duration, 'rate_hz': args.rate, 'nodes': dict(nodes),
-                  'results': rows, 'publisher_worst_gap_ms': publisher_gap, 'trajectory': traj,
+                  'results': rows, 'publisher_worst_gap_ms': publisher_gap,
+                  'publisher_worst_gap_at_s': publisher_gap_at, 'trajectory': traj,
                   'samples': sampler.rows,
                   'diagnostics': {ns: driver.diagnostics[ns] for ns in driver.namespaces}}
         if args.png and sampler.rows:
@@ -578,7 +581,9 @@ def print_report(report, logs):
               f"{r['worst_gap_ms']:.1f} ({r['worst_gap_at_s']:.0f}) | "
               f"{r['non_finite_commands'] + r['non_finite_efforts']} |")
     print(f"(latency to {report['results'][0]['latency_to']}; the publisher's own worst gap "
-          f"{report['publisher_worst_gap_ms']:.1f} ms)")
+          f"{report['publisher_worst_gap_ms']:.1f} ms at "
+          f"{report.get('publisher_worst_gap_at_s', math.nan):.1f} s: a gap of the driver, not "
+          f"of the node)")
     traj = report.get('trajectory') or {}
     if traj.get('published'):
         r = report['results'][0]
