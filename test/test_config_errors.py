@@ -443,3 +443,59 @@ def test_numbers_too_large_for_a_float_say_so(value):
             cog_id_ros.Mechanism.from_parameters(params)
         assert info.value.parameter == 'links.link2.mass'
         assert 'too large for a float' in str(info.value)
+
+
+@pytest.mark.parametrize('path', [0, True, None, 1.5, ['config/paper_four_bar_a.yaml']],
+                         ids=['int', 'bool', 'None', 'float', 'list'])
+def test_a_params_file_that_is_not_a_path_is_refused_without_touching_descriptors(path):
+    """Reliability item 4 (found by the adversarial test): an int or True was taken as a
+    file descriptor and closed (stdout itself for True); None raised TypeError."""
+    import os
+    with pytest.raises(cog_id_ros.MechanismConfigError, match='must be a path to a file'):
+        cog_id_ros.Mechanism.from_params_file(path)
+    os.fstat(1)                       # stdout is still open
+
+
+def test_a_fifo_as_params_file_is_refused_instead_of_blocking(tmp_path):
+    """Reliability item 4: reading a FIFO blocked for ever."""
+    import os
+    fifo = tmp_path / 'params.yaml'
+    os.mkfifo(fifo)
+    with pytest.raises(cog_id_ros.MechanismConfigError, match='not a regular file'):
+        cog_id_ros.Mechanism.from_params_file(str(fifo))
+
+
+def test_a_key_written_twice_is_an_error_not_the_last_one_winning(tmp_path):
+    """Reliability item 4: 'mass: 1.0' then 'mass: -5.0' in one mapping silently took the
+    second; a ROS parameter file with a repeated key is a mistake to point at."""
+    text = open(PAPER_A, encoding='utf-8').read().replace(
+        '        mass: 1.0\n', '        mass: 1.0\n        mass: 2.0\n', 1)
+    path = tmp_path / 'dup.yaml'
+    path.write_text(text, encoding='utf-8')
+    with pytest.raises(cog_id_ros.MechanismConfigError, match="'mass' is written twice"):
+        cog_id_ros.Mechanism.from_params_file(str(path))
+
+
+def test_floats_without_a_dot_are_numbers_as_rcl_reads_them(tmp_path):
+    """Reliability item 4: YAML 1.1 reads '1e0' as a string, so the API refused
+    'mass: 1e0' as not a number while the node (rcl) reads 1.0."""
+    text = open(PAPER_A, encoding='utf-8').read().replace('mass: 1.0', 'mass: 1e0')
+    path = tmp_path / 'e.yaml'
+    path.write_text(text, encoding='utf-8')
+    assert cog_id_ros.Mechanism.from_params_file(str(path)).link_mass == [1.0, 1.0, 1.0]
+
+
+def test_a_line_of_deeply_nested_block_entries_is_refused_before_parsing(tmp_path):
+    """Reliability item 4: '- - - ... x' 50,000 deep crashes libyaml's parser."""
+    path = tmp_path / 'deep.yaml'
+    path.write_text('- ' * 50000 + 'x\n', encoding='utf-8')
+    with pytest.raises(cog_id_ros.MechanismConfigError, match='block entries'):
+        cog_id_ros.Mechanism.from_params_file(str(path))
+
+
+def test_a_tiny_axis_is_a_direction_like_any_other():
+    """docs/mechanism.md: any finite non-zero axis is normalised ([1e-200, 0, 0] was refused
+    as zero-length)."""
+    params = with_changes(from_yaml(PAPER_A), joints__joint2__axis=[0.0, 0.0, 1e-200])
+    mech = cog_id_ros.Mechanism.from_parameters(params)
+    assert mech.joint_specs[1].axis == (0.0, 0.0, 1.0)

@@ -213,8 +213,8 @@ class Mechanism:
             if ends[0] == ends[1]:
                 raise MechanismConfigError(prefix + 'child', 'must differ from the parent link')
             axis = r.vector(prefix + 'axis', 3, default=(0.0, 0.0, 1.0))
-            norm = math.hypot(*axis)     # no overflow for entries near 1e308
-            if norm < 1e-12:
+            norm = math.hypot(*axis)     # no overflow near 1e308, no underflow near 1e-308
+            if not norm > 0.0:
                 raise MechanismConfigError(prefix + 'axis', f'must not be zero-length, got {list(axis)}')
             self.joint_types.append(kind)
             offsets = {}
