@@ -106,3 +106,46 @@ def test_every_error_carries_a_reason_the_caller_can_map(mechanisms):
             seen[exc.reason] = exc
     assert set(seen) == {'non_finite', 'singular', 'malformed', 'out_of_range'}
     assert set(seen) <= set(cog_id_ros.REASONS)
+
+
+class Floaty:
+    """An object whose conversion to float fails with an unexpected exception."""
+
+    def __float__(self):
+        raise RuntimeError('no float here')
+
+
+@pytest.mark.parametrize('q', [[True], [np.bool_(True)], [[True]], [Floaty()], True],
+                         ids=['bool', 'numpy bool', 'nested bool', 'strange __float__', 'bare bool'])
+def test_booleans_and_strange_objects_are_malformed(mechanisms, q):
+    """Reliability item 5 (found by the adversarial test): [True, 0.0] was taken as numbers,
+    a raising __float__ passed its RuntimeError through."""
+    s = cog_id_ros.InverseDynamics(mechanisms[ONE])
+    for call in (lambda: s.torques(q), lambda: s.sample_torques(q, [0.0], [0.0]),
+                 lambda: s.torques([1.5], q, None)):
+        with pytest.raises(cog_id_ros.SetpointError) as info:
+            call()
+        assert info.value.reason == 'malformed'
+
+
+def test_misuse_of_the_api_is_a_cog_id_error(mechanisms):
+    """Reliability item 5: only CogIdError subclasses, also for a wrong argument."""
+    s = cog_id_ros.InverseDynamics(mechanisms[ONE])
+    with pytest.raises(cog_id_ros.CogIdError, match="on_invalid must be 'raise' or 'skip'"):
+        s.evaluate([[1.5]], on_invalid='SKIP')
+    with pytest.raises(cog_id_ros.MechanismConfigError, match='must be a cog_id_ros.Mechanism'):
+        cog_id_ros.InverseDynamics(None)
+    assert s.sample_torques([1.5]) == s.torques([1.5]).tolist()     # qd, qdd default to 0
+
+
+@pytest.mark.parametrize('kind', [np.uint8, np.uint32, np.float16, np.float32, np.int64])
+def test_sample_torques_computes_in_double_whatever_the_scalar_type(kind):
+    """Reliability item 5 (found by the adversarial test): numpy unsigned velocities wrapped
+    around in -qd (silently wrong torques), float16 ones were computed in float16."""
+    mech = cog_id_ros.Mechanism.from_params_file(TWO)
+    s, ref = cog_id_ros.InverseDynamics(mech), cog_id_ros.InverseDynamics(mech)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        got = s.sample_torques([2.0, 1.14], [kind(5)] * 2, [kind(3)] * 2)
+    assert got == ref.sample_torques([2.0, 1.14], [5.0, 5.0], [3.0, 3.0])
+    assert all(type(x) is float for x in got)

@@ -19,15 +19,17 @@ import numpy as np
 from . import closure
 from . import spatial as sp
 from .cog_jacobian import cog_accelerations, cog_drifts, cog_jacobians, cog_poses, cog_velocities
-from .errors import ClosureError, CogIdError, SetpointError, SingularConfigurationError
+from .continuation import (MAX_ANGLE, MAX_STEPS, MIN_STEP, actuator_ratio, correction_bounds,
+                           correction_ok, fits_one_step, intermediate_goal, joint_step_limits,
+                           prediction, revolute_active, step_ratio, wrapped_state)
+from .errors import (ClosureError, CogIdError, MechanismConfigError, SetpointError,
+                     SingularConfigurationError)
 from .joint_motion import (active_velocity_map, closure_drift, combine, projection_gram,
                            velocity_basis)
 from .kinematics import link_bias_accelerations, link_twists
 from .lane_linalg import solve_spd
+from .mechanism import Mechanism
 from .newton_euler import newton_euler_force, rotated_inertia_times
-from .continuation import (MAX_ANGLE, MAX_STEPS, MIN_STEP, actuator_ratio, correction_bounds, correction_ok,
-                           fits_one_step, intermediate_goal, joint_step_limits, prediction,
-                           revolute_active, step_ratio, wrapped_state)
 from .sample_program import SampleProgram
 
 
@@ -115,6 +117,10 @@ class InverseDynamics:
     continuation_step = 0.1
 
     def __init__(self, mechanism):
+        if not isinstance(mechanism, Mechanism):
+            raise MechanismConfigError(
+                'mechanism', f'must be a cog_id_ros.Mechanism (from Mechanism.from_params_file '
+                             f'or from_parameters), got {type(mechanism).__name__}')
         self.mechanism = mechanism
         self._limits = joint_step_limits(mechanism, self.continuation_step)
         self._bounds = correction_bounds(self._limits)
@@ -148,7 +154,7 @@ class InverseDynamics:
             return np.array(self._serve_one(q[0].tolist(), qd[0].tolist(), qdd[0].tolist()))
         return self._evaluate(q, qd, qdd, 'raise').torques
 
-    def sample_torques(self, q, qd, qdd):
+    def sample_torques(self, q, qd=None, qdd=None):
         """One sample at control rate: three sequences of M floats in, a list of M torques out.
 
         The same numbers, state and errors as :meth:`torques` on one sample, without the
@@ -178,7 +184,7 @@ class InverseDynamics:
         """Torques with per-sample status (an Evaluation). on_invalid='skip' marks samples that
         cannot be served as invalid instead of raising; the others are computed as usual."""
         if on_invalid not in ('raise', 'skip'):
-            raise ValueError(f"on_invalid must be 'raise' or 'skip', got {on_invalid!r}")
+            raise SetpointError(f"on_invalid must be 'raise' or 'skip', got {on_invalid!r}")
         q, qd, qdd, _ = self._inputs(q, qd, qdd)
         return self._evaluate(q, qd, qdd, on_invalid)
 
@@ -767,11 +773,16 @@ def _floats(value):
 def _float_array(label, value, m):
     """``value`` as a float array; a plain number is one sample when m == 1. SetpointError
     (reason 'malformed') for strings, mappings, booleans, ragged or non-numeric input."""
-    if isinstance(value, (str, bytes, dict)) or (
+    if isinstance(value, (str, bytes, dict, bool, np.bool_)) or (
             not isinstance(value, np.ndarray) and not hasattr(value, '__len__') and
             not isinstance(value, (int, float, np.number))):
         raise SetpointError(f'{label}: must be numbers (one per active joint), got '
                             f'{type(value).__name__}')
+    if isinstance(value, (list, tuple)) and any(
+            isinstance(x, (bool, np.bool_)) or
+            (isinstance(x, (list, tuple)) and any(isinstance(y, (bool, np.bool_)) for y in x))
+            for x in value):
+        raise SetpointError(f'{label}: must be numbers (one per active joint), not booleans')
     try:
         raw = np.asarray(value)
         if raw.dtype.kind not in 'iufO':
@@ -783,8 +794,9 @@ def _float_array(label, value, m):
     except FloatingPointError:
         raise SetpointError(f'{label}: a value beyond the range of a double',
                             reason='out_of_range') from None
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise SetpointError(f'{label}: must be numbers (one per active joint), not {exc}') from None
+    except Exception as exc:   # noqa: BLE001 (whatever a strange object's __float__ raises)
+        raise SetpointError(f'{label}: must be numbers (one per active joint), not '
+                            f'{type(exc).__name__}: {exc}') from None
     if array.ndim == 0:
         if m != 1:
             raise SetpointError(f'{label}: a single number is a setpoint for one active joint; '
