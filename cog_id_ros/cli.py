@@ -188,8 +188,15 @@ def _signal_name(signum):
         return f'signal {signum}'
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with a usage mistake reported as one line (not the whole usage block)."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+
+
 def build_parser():
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog=PROG,
         description='Actuator torques/forces of a closed-link mechanism along a trajectory '
                     '(COG-Jacobian inverse dynamics): CSV in, CSV and an optional plot out.',
@@ -276,8 +283,9 @@ def main(argv=None):
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         # the reader of stdout went away (e.g. `| head`): silence the flush at exit
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        if sys.stdout is not None:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
         return EXIT_BROKEN_PIPE
     except MemoryError:
         print(f'{PROG}: error: out of memory (split the input, or lower --chunk-size)',
@@ -894,11 +902,17 @@ def run(args, stdout, stderr, signals=None):
     clean = finite_for_json(summary)
     for note in clean['notes']:
         print(f'{PROG}: note: {note}', file=stderr)
-    if args.json:
-        stdout.write(json.dumps(clean, indent=2, allow_nan=False))
-        stdout.write('\n')
-    else:
-        print(format_summary(summary), file=stdout)
+    text = json.dumps(clean, indent=2, allow_nan=False) if args.json else format_summary(summary)
+    if stdout is None:                  # started with stdout closed (>&-): like a closed pipe
+        raise BrokenPipeError('stdout is closed')
+    try:
+        stdout.write(text + '\n')
+        stdout.flush()
+    except BrokenPipeError:
+        raise
+    except OSError as exc:              # e.g. stdout is /dev/full: the outputs are complete
+        raise ToolError(f'the outputs are written, but the summary cannot be printed on '
+                        f'stdout: {exc.strerror or exc}', EXIT_WRITE) from None
     return EXIT_OK
 
 

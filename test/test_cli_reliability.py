@@ -515,3 +515,30 @@ def test_help_documents_the_new_options_and_statuses(tmp_path):
                   'a FIFO, device or socket is refused', '143 SIGTERM', '129 SIGHUP',
                   '1e-09 .. 1e+09 s', 'null in the JSON'):
         assert words in text, words
+
+
+def test_a_closed_or_full_stdout_is_not_an_internal_error(tmp_path):
+    """No traceback, no 'internal error' (found by the adversarial test): a closed stdout is
+    a closed pipe (141); a full one is a write error (4) after complete outputs."""
+    from test_cli import tool_command
+    args = tool_command() + ['--params-file', str(PARAMS_A), '--input', str(TARGET),
+                             '--output', 'tau.csv', '--json']
+    closed = subprocess.run(args, cwd=tmp_path, text=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, timeout=300,
+                            preexec_fn=lambda: os.close(1))
+    assert closed.returncode == 141 and 'Traceback' not in closed.stderr, closed.stderr
+    with open('/dev/full', 'w') as full:
+        proc = subprocess.run(args, cwd=tmp_path, text=True, stdout=full,
+                              stderr=subprocess.PIPE, timeout=300)
+    assert proc.returncode == 4 and 'internal error' not in proc.stderr
+    assert 'summary cannot be printed' in proc.stderr
+    assert (tmp_path / 'tau.csv').exists()
+
+
+def test_a_usage_mistake_is_one_line():
+    """Every refusal is one line: argparse printed its whole usage block before the error."""
+    proc = run_tool('--params-file', PARAMS_A, '--input', TARGET, '--output', 'x.csv',
+                    '--chunk-size', '0', cwd='/tmp')
+    assert proc.returncode == 2
+    [line] = proc.stderr.strip().splitlines()
+    assert '--chunk-size' in line and '--help' in line
