@@ -4,6 +4,9 @@ Matplotlib's object API on the Agg canvas: no pyplot, no display, no global back
 switch, so it works on a headless machine and inside other programs.
 """
 
+import math
+import warnings
+
 import numpy as np
 
 #: below this many samples the curve also shows the sample points
@@ -30,10 +33,23 @@ def plot_efforts(path, time, efforts, valid, joints, stats, title, units, subtit
     """Draw and save the effort plot (see :func:`_plot`); when matplotlib cannot lay out
     the time axis (times near 1e308 s overflow its tick computation), the curves are
     drawn against the row number instead, and the axis label says why."""
-    try:
-        _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, False)
-    except (ValueError, OverflowError, FloatingPointError):
-        _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, True)
+    with warnings.catch_warnings(), np.errstate(all='ignore'):
+        warnings.simplefilter('ignore', RuntimeWarning)    # matplotlib's, on extreme data
+        try:
+            _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, False)
+        except (ValueError, OverflowError, FloatingPointError):
+            _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, True)
+
+
+def _scale(values):
+    """(factor, label) for drawing values beyond 1e250 in units of a power of ten (matplotlib
+    cannot lay out an axis near the largest double); (1.0, '') otherwise."""
+    finite = np.abs(values[np.isfinite(values)])
+    largest = float(finite.max()) if finite.size else 0.0
+    if largest <= 1e250:
+        return 1.0, ''
+    power = int(math.floor(math.log10(largest)))
+    return 10.0 ** -power, f' \u00d7 1e{power}'
 
 
 def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, by_row):
@@ -62,25 +78,26 @@ def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt
     marker = '.' if time.size <= _MARKER_LIMIT else None
     for k, (ax, joint, st, unit) in enumerate(zip(axes, joints, stats, units)):
         quantity, symbol = _quantity(unit)
-        curve = np.where(valid, efforts[:, k], np.nan)
+        factor, scaled = _scale(np.where(valid, efforts[:, k], 0.0))
+        curve = np.where(valid, efforts[:, k], np.nan) * factor
         ax.axhline(0.0, color='0.75', lw=0.8, zorder=0)
         ax.plot(time, curve, color='C0', lw=1.4, marker=marker, ms=4,
                 label=f'{joint} {quantity}')
         if st.get('peak_effort') is not None:
             x_peak = float(st['peak_effort_row']) if by_row else st['peak_effort_time']
-            ax.plot([x_peak], [st['peak_effort_signed']], 'o', color='C3',
+            ax.plot([x_peak], [st['peak_effort_signed'] * factor], 'o', color='C3',
                     ms=7, mfc='none', mew=1.8,
                     label=f"peak |{symbol}| = {_fmt(st['peak_effort'])} {unit}  "
                           f"(t = {_fmt(st['peak_effort_time'])} s, row {st['peak_effort_row']})")
             rms = st['rms_effort']
-            ax.axhline(rms, color='C2', ls='--', lw=1.0,
+            ax.axhline(rms * factor, color='C2', ls='--', lw=1.0,
                        label=f'RMS = {_fmt(rms)} {unit}  (dashed: \u00b1RMS)')
-            ax.axhline(-rms, color='C2', ls='--', lw=1.0)
+            ax.axhline(-rms * factor, color='C2', ls='--', lw=1.0)
         if t_skipped.size:
             ax.plot(t_skipped, np.zeros_like(t_skipped), '|', color='red', ms=12, mew=1.2,
                     transform=ax.get_xaxis_transform(), clip_on=False,
                     label=f'skipped rows ({t_skipped.size}): not solved')
-        ax.set_ylabel(f'{quantity}  [{unit}]')
+        ax.set_ylabel(f'{quantity}  [{unit}{scaled}]')
         ax.grid(True, color='0.9', lw=0.6)
         ax.legend(loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize='small',
                   frameon=False, borderaxespad=0.0)

@@ -542,3 +542,18 @@ def test_a_usage_mistake_is_one_line():
     assert proc.returncode == 2
     [line] = proc.stderr.strip().splitlines()
     assert '--chunk-size' in line and '--help' in line
+
+
+def test_efforts_near_the_largest_double_are_drawn_in_powers_of_ten(tmp_path):
+    """Efforts of +-7.5e307 N m made matplotlib fail ('arange: cannot compute length') and
+    the run exit 4, after RuntimeWarnings on stderr (found by the adversarial test)."""
+    import warnings
+    from cog_id_ros import plotting
+    efforts = np.array([[7.5e307], [-7.5e307], [1e307]])
+    stats = [{'peak_effort': 7.5e307, 'peak_effort_signed': 7.5e307, 'peak_effort_time': 0.0,
+              'peak_effort_row': 1, 'rms_effort': 6.2e307}]
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        plotting.plot_efforts(tmp_path / 'p.png', [0.0, 1.0, 2.0], efforts, None, ['joint3'],
+                              stats, title='heavy', units=['N m'])
+    assert (tmp_path / 'p.png').stat().st_size > 1000
