@@ -475,7 +475,7 @@ def _check_steps(path, time, rows, column):
         h = float(steps[k - 1])
         what = 'small' if h < MIN_ESTIMATE_STEP else 'large'
         raise TrajectoryError(
-            path, f'the time step to this row, {h:.3g} s (from row {int(rows[k - 1]) + 1}), is too '
+            path, f'the time step to this row, {h!r} s (from row {int(rows[k - 1]) + 1}), is too '
             f'{what} to estimate {column} and the other absent derivatives: estimates need '
             f'steps of {MIN_ESTIMATE_STEP:g} .. {MAX_ESTIMATE_STEP:g} s (rescale the time '
             'column, or give the velocity and acceleration columns)',

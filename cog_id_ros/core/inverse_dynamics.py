@@ -528,8 +528,8 @@ class InverseDynamics:
         if final and step.mismatch > m.setpoint_tolerance:
             raise ClosureError(
                 f'{where}the redundant setpoint disagrees with the loop closure by '
-                f'{step.mismatch:.3g} (rad or m), more than mechanism.setpoint_tolerance '
-                f'{m.setpoint_tolerance:.3g}', step.mismatch, sample, reason='inconsistent')
+                f'{step.mismatch:.6g} (rad or m), more than mechanism.setpoint_tolerance '
+                f'{m.setpoint_tolerance:.6g}', step.mismatch, sample, reason='inconsistent')
 
     # --- positions: a batch ----------------------------------------------------------------
 
