@@ -499,3 +499,21 @@ def test_a_tiny_axis_is_a_direction_like_any_other():
     params = with_changes(from_yaml(PAPER_A), joints__joint2__axis=[0.0, 0.0, 1e-200])
     mech = cog_id_ros.Mechanism.from_parameters(params)
     assert mech.joint_specs[1].axis == (0.0, 0.0, 1.0)
+
+
+@pytest.mark.parametrize('name', ['mechanism__gravity', 'mechanism__closure_tolerance',
+                                  'links__link1__com'])
+def test_an_empty_mapping_is_not_silently_the_default(name):
+    """Reliability item 4 (found by the adversarial test): 'gravity: {}' meant 'use the
+    default' without a word."""
+    params = with_changes(from_yaml(PAPER_A), **{name: {}})
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert info.value.parameter == name.replace('__', '.')
+
+
+def test_a_closure_tolerance_no_double_can_meet_is_refused():
+    """5e-324 was accepted: no pose would ever count as closed."""
+    params = with_changes(from_yaml(PAPER_A), mechanism__closure_tolerance=5e-324)
+    with pytest.raises(cog_id_ros.MechanismConfigError, match='at least 1e-14'):
+        cog_id_ros.Mechanism.from_parameters(params)

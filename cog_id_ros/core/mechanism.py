@@ -47,6 +47,9 @@ MAX_MASS = 1e9              # kg
 MAX_INERTIA = 1e12          # kg m^2: every inertia entry
 MAX_GRAVITY = 1e4           # m/s^2: length of the gravity vector
 MIN_TORQUE_WEIGHT, MAX_TORQUE_WEIGHT = 1e-9, 1e9
+#: tightest closure_tolerance: residuals of a closed loop in doubles are ~1e-16 of its size,
+#: so a tolerance below this would make no pose count as closed
+MIN_CLOSURE_TOLERANCE = 1e-14
 MAX_CLOSURE_TOLERANCE = 1e-3          # m or rad: a looser "closed" loop gives wrong torques
 MAX_CONDITION_NUMBER_LIMIT = 1e15     # beyond this double precision keeps no digit
 
@@ -162,6 +165,7 @@ class Mechanism:
                                                    low=1.0, high=MAX_CONDITION_NUMBER_LIMIT)
         self.closure_tolerance = self._positive(r, 'mechanism.closure_tolerance',
                                                 DEFAULT_CLOSURE_TOLERANCE,
+                                                low=MIN_CLOSURE_TOLERANCE,
                                                 high=MAX_CLOSURE_TOLERANCE)
 
     @staticmethod

@@ -90,7 +90,9 @@ def flatten(tree, prefix='', source='parameters'):
                 pre.rstrip('.') or source,
                 f'parameter names must be non-empty strings, got {show(key)}')
         name = f'{pre}{key}'
-        if isinstance(value, dict):
+        if isinstance(value, dict) and not value:
+            flat[name] = value       # an empty mapping is a value (refused by its getter),
+        elif isinstance(value, dict):  # not silently "no parameter" (the default)
             if id(value) in open_ids:
                 raise MechanismConfigError(
                     name, 'contains itself (a recursive YAML alias); write the values out')
