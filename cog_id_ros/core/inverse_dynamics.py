@@ -384,7 +384,7 @@ class InverseDynamics:
                 return done
         (kind, payload), state = self._follow(target, self._step_solver(qd, qdd, sample), sample)
         if kind == 'program':
-            return payload, state
+            return list(payload), state
         return self._torques(payload, qd, qdd, sp.ScalarOps), state
 
     def _solve_serial(self, target, sample=None, want_step=True):
@@ -507,8 +507,11 @@ class InverseDynamics:
             q = [x - sum(b * d for b, d in zip(row, dz)) for x, row in zip(sol.q, basis)]
             for k, j in enumerate(m.primary_joints):
                 q[j] = sol.q[j] - dz[k]
-            sol = closure.solve_closure(m.model, q, m.free_joints, ops, m.closure_tolerance)
+            sol = closure.solve_closure(m.model, q, m.free_joints, ops, m.closure_tolerance,
+                                        max_iter=SERIAL_NEWTON_ITERATIONS)
             basis = velocity_basis(m, sol)
+            if scalar and not sol.converged:
+                break                           # unclosable on the way: _check says so
         mismatch = ops.maxabs([sol.q[j] - t for j, t in zip(m.active_index, target)])
         return sol, basis, mismatch
 
@@ -582,7 +585,8 @@ class InverseDynamics:
         guess = knots_q[prv] + lam * (knots_q[nxt] - knots_q[prv])
         guess[:, m.primary_joints] = qa[:, m.primary]
         step = self._closure_step([guess[:, j] for j in range(len(m.joints))],
-                                  [qa[:, a] for a in range(len(m.active_joints))], sp.ArrayOps)
+                                  [qa[:, a] for a in range(len(m.active_joints))], sp.ArrayOps,
+                                  SERIAL_NEWTON_ITERATIONS)   # what does not close is re-solved
         positions = np.column_stack(np.broadcast_arrays(*step.sol.q, np.zeros(n))[:-1])
         basis = np.stack([np.column_stack(np.broadcast_arrays(*row, np.zeros(n))[:-1])
                           for row in step.basis], axis=1)          # (N, n_joints, dof)
