@@ -42,9 +42,10 @@ def strict_json(text):
 
 # --- item 11: wrapped angles and jumps -----------------------------------------------------------
 
-def test_unwrap_gives_the_torques_of_the_unwrapped_motion(tmp_path):
-    """Reliability item 11: --unwrap takes each revolute position as the 2 pi equivalent
-    nearest the previous row's, and says how many rows it shifted."""
+def wrapped_crank_files(tmp_path):
+    """The slider-crank's crank over 2 s at 1 kHz: true.csv unwrapped, wrapped.csv as an
+    encoder in (-pi, pi] reports it, and ref.csv the tool's efforts for the true motion.
+    Returns the true angles."""
     t = np.arange(2001) * 1e-3
     theta = crank_motion(t)[0]
     write_csv(tmp_path / 'true.csv', {'time': t, 'crank_joint.position': theta})
@@ -52,6 +53,13 @@ def test_unwrap_gives_the_torques_of_the_unwrapped_motion(tmp_path):
     ref = run_tool('--params-file', SLIDER_CRANK, '--input', 'true.csv', '--output', 'ref.csv',
                    cwd=tmp_path)
     assert ref.returncode == 0, ref.stderr
+    return theta
+
+
+def test_unwrap_gives_the_torques_of_the_unwrapped_motion(tmp_path):
+    """Reliability item 11: --unwrap takes each revolute position as the 2 pi equivalent
+    nearest the previous row's, and says how many rows it shifted."""
+    theta = wrapped_crank_files(tmp_path)
     proc = run_tool('--params-file', SLIDER_CRANK, '--input', 'wrapped.csv', '--output',
                     'tau.csv', '--unwrap', '--json', cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
@@ -387,13 +395,7 @@ def test_skipped_jumps_never_feed_estimates_across_a_gap(tmp_path):
     row until the angle comes back near the last accepted one; the rows solved after that
     gap get derivatives estimated from their own piece of the trajectory, not across the
     gap (which hides a whole turn), so their torques are those of the true motion."""
-    t = np.arange(2001) * 1e-3
-    theta = crank_motion(t)[0]
-    write_csv(tmp_path / 'true.csv', {'time': t, 'crank_joint.position': theta})
-    write_csv(tmp_path / 'wrapped.csv', {'time': t, 'crank_joint.position': wrap(theta)})
-    ref = run_tool('--params-file', SLIDER_CRANK, '--input', 'true.csv', '--output', 'ref.csv',
-                   cwd=tmp_path)
-    assert ref.returncode == 0, ref.stderr
+    theta = wrapped_crank_files(tmp_path)
     proc = run_tool('--params-file', SLIDER_CRANK, '--input', 'wrapped.csv', '--output',
                     'tau.csv', '--skip-invalid', '--json', cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
@@ -402,7 +404,7 @@ def test_skipped_jumps_never_feed_estimates_across_a_gap(tmp_path):
     _, _, tau = tio.read_efforts(tmp_path / 'tau.csv')
     _, _, expected = tio.read_efforts(tmp_path / 'ref.csv')
     solved = ~np.isnan(tau[:, 0])
-    later = np.flatnonzero(solved & (np.arange(t.size) > np.flatnonzero(~solved)[0]))
+    later = np.flatnonzero(solved & (np.arange(theta.size) > np.flatnonzero(~solved)[0]))
     assert later.size > 0                     # rows solved after the first gap
     scale = np.max(np.abs(expected))
     np.testing.assert_allclose(tau[solved], expected[solved], rtol=0, atol=1e-6 * scale)
