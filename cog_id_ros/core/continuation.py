@@ -117,11 +117,8 @@ def fits_one_step(mechanism, limits, state, target, moved):
 def step_ratio(mechanism, limits, state, target, moved):
     """How many step limits the move to ``target`` is: the largest of |actuator motion| and
     |predicted joint motion| over the joints' limits."""
-    q = state[0]
-    ratios = [abs(target[a] - q[j]) / limits[j]
-              for a, j in zip(mechanism.primary, mechanism.primary_joints)]
-    ratios += [abs(dx) / lim for dx, lim in zip(moved, limits)]
-    return max(ratios)
+    return max(actuator_ratio(mechanism, limits, state, target),
+               max(abs(dx) / lim for dx, lim in zip(moved, limits)))
 
 
 def actuator_ratio(mechanism, limits, state, target):

@@ -148,7 +148,7 @@ class InverseDynamics:
             return np.array(self._serve_one(*sample))
         q, qd, qdd, single = self._inputs(q, qd, qdd)
         if single:
-            _, errors = self._check_finite(q, qd, qdd, single)
+            _, errors = self._check_values(q, qd, qdd, single)
             if errors:
                 raise errors[0]
             return np.array(self._serve_one(q[0].tolist(), qd[0].tolist(), qdd[0].tolist()))
@@ -191,7 +191,7 @@ class InverseDynamics:
     def solve_positions(self, q):
         """Every joint coordinate (mechanism.joints order): (n_joints,) or (N, n_joints)."""
         q, qd, _, single = self._inputs(q, None, None)
-        _, errors = self._check_finite(q, qd, qd, single)
+        _, errors = self._check_values(q, qd, qd, single)
         if errors:
             raise errors[min(errors)]
         if single:
@@ -337,7 +337,7 @@ class InverseDynamics:
             return None
         return out
 
-    def _check_finite(self, q, qd, qdd, single):
+    def _check_values(self, q, qd, qdd, single):
         """SetpointError for the first non-finite entry, or revolute position beyond
         MAX_ANGLE; returns (per-sample bool array, {sample: error})."""
         finite = np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) & np.isfinite(qdd).all(axis=1)
@@ -623,7 +623,8 @@ class InverseDynamics:
         moved = np.einsum('njk,nk->nj', prev_basis, dz)
         predicted = prev_q + moved
         predicted[:, m.primary_joints] = qa[:, m.primary]
-        near = np.abs(qa - prev_q[:, m.active_index]) <= limits[m.active_index]
+        near = (np.abs(qa[:, m.primary] - prev_q[:, m.primary_joints]) <=   # as fits_one_step
+                limits[m.primary_joints])
         return (near.all(axis=1) & (np.abs(moved) <= limits).all(axis=1) &
                 (np.abs(positions - predicted) <= bounds).all(axis=1))
 
@@ -685,7 +686,7 @@ class InverseDynamics:
         m = self.mechanism
         n, n_act = q.shape
         single = n == 1
-        finite, errors_in = self._check_finite(q, qd, qdd, single)
+        finite, errors_in = self._check_values(q, qd, qdd, single)
         if errors_in and on_invalid == 'raise':
             raise errors_in[min(errors_in)]
         if single:
@@ -746,7 +747,7 @@ class InverseDynamics:
         """Run ``compute(step, ops[, qd lanes])`` on one sample or a batch; numpy results."""
         with_rates = with_rates or qd is not None or compute.__code__.co_argcount == 3
         q, qd, _, single = self._inputs(q, qd, None)
-        finite, errors = self._check_finite(q, qd, qd, single)
+        finite, errors = self._check_values(q, qd, qd, single)
         if errors:
             raise errors[min(errors)]
         if single:
