@@ -23,10 +23,10 @@ setup(
     python_requires='>=3.10',
     entry_points={
         'console_scripts': [
-            'cog_id_node = cog_id_ros.node:main',
-            'cog_id_torques = cog_id_ros.cli:main',
-            'cog_id_player = cog_id_ros.player:main',
-            'cog_id_demo = cog_id_ros.demo:main',
+            'cog_id_node = cog_id_ros.ros.node:main',
+            'cog_id_torques = cog_id_ros.offline.cli:main',
+            'cog_id_player = cog_id_ros.ros.player:main',
+            'cog_id_demo = cog_id_ros.demos.table:main',
         ],
     },
 )

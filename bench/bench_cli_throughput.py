@@ -20,11 +20,11 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / 'tools'))
-from make_target_csv import write_csv  # noqa: E402
+import numpy as np
 
-import numpy as np  # noqa: E402
+from cog_id_ros.demos.paper_four_bar import write_csv
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def tool_command():
@@ -32,7 +32,7 @@ def tool_command():
     if script.exists():
         return [str(script)]
     found = shutil.which('cog_id_torques')
-    return [found] if found else [sys.executable, '-m', 'cog_id_ros.cli']
+    return [found] if found else [sys.executable, '-m', 'cog_id_ros.offline.cli']
 
 
 def run_measured(cmd):

@@ -67,7 +67,7 @@ def echo_main(mode):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from cog_id_ros.node import control_qos
+    from cog_id_ros.ros.node import control_qos
 
     rclpy.init()
     node = rclpy.create_node('echo_node')
@@ -80,7 +80,7 @@ def echo_main(mode):
 
     loop = None
     if mode == 'loop':
-        from cog_id_ros.setpoint_loop import SetpointLoop
+        from cog_id_ros.ros.setpoint_loop import SetpointLoop
         loop = SetpointLoop(node, JointState, 'joint_setpoint', on_setpoint, control_qos())
         loop.start()
     else:
@@ -114,8 +114,8 @@ class Driver:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
-        from cog_id_ros.node import control_qos
-        from cog_id_ros.setpoint_loop import SetpointLoop
+        from cog_id_ros.ros.node import control_qos
+        from cog_id_ros.ros.setpoint_loop import SetpointLoop
 
         self.JointState = JointState
         self.node = rclpy.create_node('bench_driver', start_parameter_services=False)

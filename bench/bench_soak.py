@@ -145,7 +145,7 @@ def trajectory_helper(args):
     from rclpy.executors import SingleThreadedExecutor
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from cog_id_ros.node import control_qos
+    from cog_id_ros.ros.node import control_qos
 
     names = args.joints.split(',')
     home = [float(x) for x in args.home.split(',')]
@@ -213,8 +213,8 @@ class Driver:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
-        from cog_id_ros.node import control_qos
-        from cog_id_ros.setpoint_loop import SetpointLoop
+        from cog_id_ros.ros.node import control_qos
+        from cog_id_ros.ros.setpoint_loop import SetpointLoop
 
         self.JointState = JointState
         self.joints, self.home, self.rate = list(joints), list(home), rate

@@ -27,7 +27,8 @@ import time
 import traceback
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), 'test'))
+for _folder in ('test', os.path.join('test', 'core')):   # test_fuzz and its helpers
+    sys.path.insert(0, os.path.join(os.path.dirname(HERE), _folder))
 
 import numpy as np  # noqa: E402
 from hypothesis import given, seed as hseed, settings  # noqa: E402

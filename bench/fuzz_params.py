@@ -30,7 +30,8 @@ import warnings
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, 'test'))
+for _folder in ('test', os.path.join('test', 'core')):   # test_fuzz and its helpers
+    sys.path.insert(0, os.path.join(REPO, _folder))
 
 import numpy as np  # noqa: E402
 from hypothesis import given, seed as hseed, settings  # noqa: E402

@@ -24,7 +24,7 @@ from . import spatial as sp
 from .errors import MechanismConfigError
 from . import kinematics as kin
 from .kinematics import BASE, JointSpec, KinematicModel
-from .params import DEFAULT_NODE_NAME, ParameterReader, load_params_file
+from .parameters import ParameterReader
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
@@ -109,8 +109,12 @@ class Mechanism:
         return cls(params)
 
     @classmethod
-    def from_params_file(cls, path, node_name=DEFAULT_NODE_NAME):
-        """From a ROS 2 parameter file (node entry ``node_name`` or ``/**``)."""
+    def from_params_file(cls, path, node_name='cog_id_node'):
+        """From a ROS 2 parameter file (node entry ``node_name`` or ``/**``).
+
+        The file is read by :mod:`cog_id_ros.params_file` (the ROS conventions live outside
+        the core); ``node_name`` defaults to its ``DEFAULT_NODE_NAME``."""
+        from ..params_file import load_params_file
         return cls(load_params_file(path, node_name))
 
     # --- reading ----------------------------------------------------------------------------

@@ -313,7 +313,7 @@ def test_an_exception_in_a_timer_callback_is_counted_not_raised(rclpy_context):
     logged, and the callback returns."""
     from rclpy.parameter import Parameter
 
-    from cog_id_ros.node import CogIdNode
+    from cog_id_ros.ros.node import CogIdNode
     from mechanisms import from_yaml
 
     overrides = [Parameter(name, value=value) for name, value in from_yaml(CONFIG_A).items()]

@@ -13,8 +13,8 @@ rclpy = pytest.importorskip('rclpy')
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from cog_id_ros.node import control_qos  # noqa: E402
-from cog_id_ros.setpoint_loop import SetpointLoop  # noqa: E402
+from cog_id_ros.ros.node import control_qos  # noqa: E402
+from cog_id_ros.ros.setpoint_loop import SetpointLoop  # noqa: E402
 from conftest import wait_until  # noqa: E402
 
 

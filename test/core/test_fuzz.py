@@ -58,14 +58,14 @@ from hypothesis.extra import numpy as hnp  # noqa: E402
 
 import cog_id_ros  # noqa: E402
 from cog_id_ros import CogIdError, MechanismConfigError  # noqa: E402
-from cog_id_ros.core.params import load_params_file  # noqa: E402
+from cog_id_ros.params_file import load_params_file  # noqa: E402
 
 try:
     from cog_id_ros.core.errors import REASONS as CORE_REASONS
 except ImportError:  # pragma: no cover (older core)
     CORE_REASONS = None
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CONFIGS = sorted(glob.glob(os.path.join(REPO, 'config', '*.yaml')))
 
 #: CPU seconds one API call may take: a base plus this much per sample (the contract is
@@ -881,7 +881,7 @@ class NodeFuzzer:
         from std_msgs.msg import Float64MultiArray
         from trajectory_msgs.msg import JointTrajectory
 
-        from cog_id_ros.node import control_qos
+        from cog_id_ros.ros.node import control_qos
 
         self.rng = random.Random(seed)
         self.active = list(active)

@@ -6,8 +6,8 @@ import stat
 import numpy as np
 import pytest
 
-from cog_id_ros import derivatives
-from cog_id_ros import trajectory_io as tio
+from cog_id_ros.offline import derivatives
+from cog_id_ros.offline import trajectory_io as tio
 
 JOINTS = ['joint1', 'joint2', 'joint3', 'joint4']
 ACTIVE = ['joint3']

@@ -10,7 +10,7 @@ pytest.importorskip('rclpy')
 
 from conftest import BIN  # noqa: E402
 
-from cog_id_ros import trajectory_io  # noqa: E402
+from cog_id_ros.offline import trajectory_io  # noqa: E402
 
 
 def exact_a(theta, thetaddot):
@@ -68,7 +68,7 @@ def test_player_rejects_a_bad_csv(ros_env, tmp_path):
 
 def test_fig4_demo_writes_the_figure_and_the_efforts(ros_env, tmp_path):
     png = tmp_path / 'fig4.png'
-    result = subprocess.run([sys.executable, '-m', 'cog_id_ros.fig4_demo', '--output', str(png),
+    result = subprocess.run([sys.executable, '-m', 'cog_id_ros.demos.fig4', '--output', str(png),
                              '--rate', '500'], env=ros_env, capture_output=True, text=True,
                             timeout=180)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -89,7 +89,7 @@ def test_fig4_demo_writes_the_figure_and_the_efforts(ros_env, tmp_path):
 def test_dev_without_a_command_prints_its_usage():
     """Reliability item 25: ./dev with no argument printed lines of its own shell code
     (and exit status 2); now a usage text and exit status 0, an unknown command exit 2."""
-    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     result = subprocess.run([os.path.join(repo, 'dev')], capture_output=True, text=True,
                             timeout=30)
     assert result.returncode == 0, result.stderr

@@ -1,33 +1,18 @@
 """Torques of the paper's four-bar, (a) one actuator and (b) two, along the target motion.
 
-    python -m cog_id_ros.demo [--step 0.1]
+    cog_id_demo [--step 0.1]
+    python -m cog_id_ros.demos.table [--step 0.1]
 
 Prints a table; the mechanism files are config/paper_four_bar_a.yaml and _b.yaml.
 """
 import argparse
 import os
+import sys
 
 import numpy as np
 
-from . import InverseDynamics, Mechanism
-
-
-def config_dir():
-    """config/ of a source checkout, else the installed share/cog_id_ros/config."""
-    here = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
-    if os.path.isdir(here):
-        return here
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        return os.path.join(get_package_share_directory('cog_id_ros'), 'config')
-    except Exception:  # noqa: BLE001 - no ament index either: report the source path
-        return here
-
-
-def target_motion(t):
-    """Paper Fig. 3, our reading: theta(t) = pi/2 + 0.5 sin(pi t) rad (crank(s) driven)."""
-    return (np.pi / 2 + 0.5 * np.sin(np.pi * t), 0.5 * np.pi * np.cos(np.pi * t),
-            -0.5 * np.pi ** 2 * np.sin(np.pi * t))
+from .. import InverseDynamics, Mechanism
+from .paper_four_bar import DURATION, config_dir, target_motion
 
 
 def paper_torques(t):
@@ -54,13 +39,14 @@ def format_table(t, tau_a, tau_b):
     return '\n'.join(lines)
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--step', type=float, default=0.1, help='table time step, s (default 0.1)')
     args = parser.parse_args(argv)
-    t = np.arange(0.0, 2.0 + 1e-9, args.step)
+    t = np.arange(0.0, DURATION + 1e-9, args.step)
     print(format_table(t, *paper_torques(t)))
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

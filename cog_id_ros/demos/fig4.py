@@ -1,6 +1,6 @@
 """The paper's Fig. 4 over real ROS 2 topics: torques of the four-bar (a) and (b).
 
-    python -m cog_id_ros.fig4_demo [--output out/fig4_torques.png] [--rate 1000]
+    python -m cog_id_ros.demos.fig4 [--output out/fig4_torques.png] [--rate 1000]
 
 What it does, end to end, as a user would:
   1. starts two ``cog_id_node`` processes, one per parameter file
@@ -29,10 +29,9 @@ import time
 
 import numpy as np
 
-from . import trajectory_io
+from ..offline import trajectory_io
+from .paper_four_bar import DURATION, config_dir, exact_torque, target_motion
 
-PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
-M, L, G = 1.0, 0.5, 9.81          # the paper's links, our reading (see config/*.yaml)
 WARM_UP = 3                       # samples the estimator needs before it is exact
 TOLERANCE = 0.01                  # of the peak torque
 
@@ -41,27 +40,6 @@ CASES = (
     ('a', 'paper_four_bar_a.yaml', '/fig4_a', ['joint3'], 1.0),
     ('b', 'paper_four_bar_b.yaml', '/fig4_b', ['joint1', 'joint3'], 0.5),
 )
-
-
-def config_dir():
-    """config/ of the source tree, or share/cog_id_ros/config of an installed package."""
-    here = os.path.join(os.path.dirname(PACKAGE_DIR), 'config')
-    if os.path.isdir(here):
-        return here
-    from ament_index_python.packages import get_package_share_directory
-    return os.path.join(get_package_share_directory('cog_id_ros'), 'config')
-
-
-def target_motion(t):
-    """theta, thetadot, thetaddot of the paper's target motion (our reading of Fig. 3)."""
-    w = math.pi
-    return (math.pi / 2 + 0.5 * np.sin(w * t), 0.5 * w * np.cos(w * t),
-            -0.5 * w * w * np.sin(w * t))
-
-
-def exact_torque(theta, thetaddot):
-    """The single actuator's torque of the paper parallelogram (a)."""
-    return (5.0 / 3.0) * M * L * L * thetaddot + 2.0 * M * G * L * np.cos(theta)
 
 
 class NodeProcess:
@@ -194,8 +172,8 @@ def plot(path, t, results, rate):
     fig.savefig(path, dpi=110)
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog='python -m cog_id_ros.fig4_demo',
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog='python -m cog_id_ros.demos.fig4',
                                      description=__doc__.split('\n\n')[0])
     parser.add_argument('--output', default=os.path.join('out', 'fig4_torques.png'),
                         help='PNG to write (default %(default)s); CSVs go beside it')
@@ -217,10 +195,10 @@ def main(argv=None):
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from .player import Player
+    from ..ros.player import Player
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    t = np.arange(int(round(2.0 * args.rate)) + 1) / args.rate
+    t = np.arange(int(round(DURATION * args.rate)) + 1) / args.rate
     theta, _, thetaddot = target_motion(t)
     exact_a = exact_torque(theta, thetaddot)
     results = []

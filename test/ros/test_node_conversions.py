@@ -4,7 +4,7 @@ import pytest
 pytest.importorskip('rclpy')
 
 from cog_id_ros.core import ClosureError, SetpointError  # noqa: E402
-from cog_id_ros.ros_conversions import REASONS, rejection  # noqa: E402
+from cog_id_ros.ros.conversions import REASONS, rejection  # noqa: E402
 
 
 @pytest.mark.parametrize('exc, reason', [
@@ -39,7 +39,7 @@ def test_a_wrapped_trajectory_is_unwrapped_before_it_is_differentiated():
     from trajectory_msgs.msg import JointTrajectory
 
     import cog_id_ros
-    from cog_id_ros.ros_conversions import JointSelector, Rejected, solve_trajectory_message
+    from cog_id_ros.ros.conversions import JointSelector, Rejected, solve_trajectory_message
     from test_node import make_trajectory
 
     mech = cog_id_ros.Mechanism.from_params_file('config/paper_four_bar_a.yaml')

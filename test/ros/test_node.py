@@ -28,8 +28,8 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
 import cog_id_ros  # noqa: E402
-from cog_id_ros.node import control_qos  # noqa: E402
-from cog_id_ros.player import RECORDER_QOS, Player  # noqa: E402
+from cog_id_ros.ros.node import control_qos  # noqa: E402
+from cog_id_ros.ros.player import RECORDER_QOS, Player  # noqa: E402
 from conftest import wait_until  # noqa: E402
 
 NS = 1_000_000_000

@@ -28,9 +28,10 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from . import stop_signals, trajectory_io
+from . import stop_signals
+from ..offline import trajectory_io
 from .node import control_qos
-from .ros_conversions import NANOSECONDS, stamp_to_ns
+from .conversions import NANOSECONDS, stamp_to_ns
 
 #: the recorder must not drop what the node sends while the player is busy publishing
 RECORDER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,

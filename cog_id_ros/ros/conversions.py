@@ -12,7 +12,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from . import derivatives
+from ..offline import derivatives
 
 NANOSECONDS = 1_000_000_000
 
@@ -345,7 +345,7 @@ def trajectory_process(conn, config):
     """
     import signal
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from .core import InverseDynamics, Mechanism
+    from ..core import InverseDynamics, Mechanism
     solver = InverseDynamics(Mechanism.from_parameters(config['mechanism']))
     selector = JointSelector(config['active_joints'])
     options = dict(unwrap=config['unwrap'], max_step=config['max_step'],

@@ -70,10 +70,10 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from . import stop_signals
-from .core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
-from .ros_conversions import (NANOSECONDS, REASONS, TRAJECTORY_REASONS, EffortMessages,
-                              JointSelector, Rejected, nearest_turn, rejection, setpoint_arrays,
-                              stamp_to_ns, trajectory_point_count, trajectory_process)
+from ..core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
+from .conversions import (NANOSECONDS, REASONS, TRAJECTORY_REASONS, EffortMessages,
+                          JointSelector, Rejected, nearest_turn, rejection, setpoint_arrays,
+                          stamp_to_ns, trajectory_point_count, trajectory_process)
 from .setpoint_filter import SetpointFilter, StampError
 from .setpoint_loop import SetpointLoop
 

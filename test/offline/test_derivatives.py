@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cog_id_ros import derivatives as d
+from cog_id_ros.offline import derivatives as d
 
 
 def f(t):

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros import trajectory_io as tio
+from cog_id_ros.offline import trajectory_io as tio
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / 'config'
 PARAMS_A = CONFIG / 'paper_four_bar_a.yaml'
 PARAMS_B = CONFIG / 'paper_four_bar_b.yaml'
@@ -57,7 +57,7 @@ def tool_command():
     if script.exists():
         return [str(script)]
     found = shutil.which('cog_id_torques')
-    return [found] if found else [sys.executable, '-m', 'cog_id_ros.cli']
+    return [found] if found else [sys.executable, '-m', 'cog_id_ros.offline.cli']
 
 
 def run_tool(*args, cwd, stderr=subprocess.PIPE):
@@ -371,7 +371,7 @@ def test_progress_bar_on_a_terminal_only(tmp_path):
     assert 'solving [' in tty and '\r' in tty
     assert '5,000/12,000 samples' in tty and '100% 12,000/12,000 samples' in tty
     # and no bar for inputs of up to 10,000 samples, even on a terminal: see ProgressBar.wanted
-    from cog_id_ros.cli import ProgressBar
+    from cog_id_ros.offline.cli import ProgressBar
 
     class Tty:
         def isatty(self):
@@ -393,7 +393,7 @@ def test_chunk_size_changes_nothing_beyond_the_closure_tolerance(tmp_path):
 
 def test_runs_without_rclpy(tmp_path):
     code = ('import sys; sys.modules["rclpy"] = None\n'
-            'from cog_id_ros.cli import main\n'
+            'from cog_id_ros.offline.cli import main\n'
             f'status = main(["--params-file", {str(PARAMS_A)!r}, "--input", {str(TARGET)!r},'
             ' "--output", "tau.csv", "--plot", "tau.png"])\n'
             'assert not any(m.startswith("rclpy") and sys.modules[m] is not None for m in sys.modules)\n'
@@ -415,7 +415,7 @@ def test_help_documents_the_scheme_rows_and_statuses(tmp_path):
 
 def test_shipped_target_trajectory_is_the_paper_motion(tmp_path):
     out = tmp_path / 'target.csv'
-    subprocess.run([sys.executable, str(ROOT / 'tools' / 'make_target_csv.py'), '--output', str(out)],
+    subprocess.run([sys.executable, '-m', 'cog_id_ros.demos.paper_four_bar', '--output', str(out)],
                    check=True, capture_output=True, timeout=120)
     assert out.read_bytes() == TARGET.read_bytes()    # the kept generator makes the shipped file
     traj = tio.read_trajectory(TARGET, ['joint1', 'joint2', 'joint3', 'joint4'], ['joint1', 'joint3'])

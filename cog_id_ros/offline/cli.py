@@ -460,7 +460,7 @@ def _reason(exc):
 
 def _row_level(exc):
     """A core error about one sample (skippable), not about the mechanism or the call."""
-    from .core.errors import REASONS
+    from ..core.errors import REASONS
     return getattr(exc, 'reason', None) in REASONS
 
 

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from cog_id_ros.setpoint_filter import NANOSECONDS, SetpointFilter, StampError
+from cog_id_ros.ros.setpoint_filter import NANOSECONDS, SetpointFilter, StampError
 
 # a stamp in 2025: float seconds would lose ~0.2 us of resolution here, integers lose none
 EPOCH_NS = 1_750_000_000 * NANOSECONDS

@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pytest
 
-from cog_id_ros import trajectory_io as tio
+from cog_id_ros.offline import trajectory_io as tio
 from test_cli import CONFIG, PARAMS_A, TARGET, core_torques, error_lines, run_tool, target, \
     tool_command, write_csv
 
@@ -471,7 +471,7 @@ def test_a_row_error_raised_in_skip_mode_skips_only_that_row():
     reason) instead of marking the row, --skip-invalid still skips just that row, keyed by
     the error's reason, and solves the rest of the chunk."""
     import cog_id_ros
-    from cog_id_ros import cli
+    from cog_id_ros.offline import cli
 
     class Evaluation:
         def __init__(self, q):
@@ -550,7 +550,7 @@ def test_efforts_near_the_largest_double_are_drawn_in_powers_of_ten(tmp_path):
     """Efforts of +-7.5e307 N m made matplotlib fail ('arange: cannot compute length') and
     the run exit 4, after RuntimeWarnings on stderr (found by the adversarial test)."""
     import warnings
-    from cog_id_ros import plotting
+    from cog_id_ros.offline import plotting
     efforts = np.array([[7.5e307], [-7.5e307], [1e307]])
     stats = [{'peak_effort': 7.5e307, 'peak_effort_signed': 7.5e307, 'peak_effort_time': 0.0,
               'peak_effort_row': 1, 'rms_effort': 6.2e307}]
