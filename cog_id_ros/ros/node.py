@@ -5,7 +5,8 @@ Run::
     cog_id_node --ros-args --params-file config/paper_four_bar_a.yaml
     python -m cog_id_ros.node --ros-args -r __ns:=/arm --params-file config/paper_four_bar_b.yaml
 
-Topics (relative names: namespaces and ``-r old:=new`` remaps apply)
+Topics (relative names: namespaces and ``-r old:=new`` remaps apply; the table with their
+QoS is :mod:`cog_id_ros.ros.topics`)
 
 * ``joint_setpoint`` (in, sensor_msgs/JointState): positions (required) and velocities
   (optional) by joint name; accelerations are estimated from the header stamps.
@@ -21,24 +22,24 @@ Topics (relative names: namespaces and ``-r old:=new`` remaps apply)
   condition number, compute time.
 
 QoS: every topic but ``/diagnostics`` is reliable, keep-last, volatile, depth
-``CONTROL_QOS_DEPTH`` (history, depth and reliability can be overridden per topic with
+``topics.CONTROL_QOS_DEPTH`` (history, depth and reliability can be overridden per topic with
 rclpy's QoS override parameters, e.g.
 ``-p qos_overrides./joint_setpoint.subscription.depth:=1``). See docs/node.md for why.
 
 Parameters: the mechanism (``mechanism.*``, ``links.*``, ``joints.*``; see the README's
-mechanism parameter file section) and the node's own, ``NODE_PARAMETERS`` below (bounds in
-``PARAMETER_BOUNDS``). All are read once at start-up and are read-only afterwards,
+mechanism parameter file section) and the node's own, written once with their types,
+defaults, bounds and meaning in :mod:`cog_id_ros.ros.parameters` (``NODE_PARAMETERS``). All are read once at start-up and are read-only afterwards,
 ``use_sim_time`` included. A parameter that cannot be honoured (or a params file rcl cannot
 parse) ends the process with exit status 2 and one line naming the parameter.
 ``cog_id_node --help`` prints the usage. Diagnostics keys: ``DIAGNOSTIC_KEYS``.
 
-Threads: ``joint_setpoint`` is served by a thread of its own (:mod:`cog_id_ros.setpoint_loop`),
+Threads: ``joint_setpoint`` is served by a thread of its own (:mod:`.setpoint_loop`),
 trajectories by a thread and a process of their own (:class:`TrajectoryWorker`), everything
 else by the executor in the main thread; shared state is under ``self.lock``. No exception
 in a callback ends the node: it is counted (``internal_errors``) and logged with its type.
 
 The physics is in :mod:`cog_id_ros.core`, the acceleration estimator in
-:mod:`cog_id_ros.setpoint_filter`, the message checks in :mod:`cog_id_ros.ros_conversions`.
+:mod:`cog_id_ros.ros.setpoint_filter`, the message checks in :mod:`cog_id_ros.ros.conversions`.
 """
 import collections
 import functools
@@ -63,7 +64,6 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -71,6 +71,9 @@ from trajectory_msgs.msg import JointTrajectory
 
 from . import stop_signals
 from ..core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
+from .parameters import (MAX_QOS_DEPTH, MECHANISM_PREFIXES, NODE_PARAMETERS,
+                         QOS_OVERRIDE_VALUES)
+from .topics import DIAGNOSTICS_QOS_DEPTH, TOPICS, control_qos
 from .conversions import (NANOSECONDS, REASONS, TRAJECTORY_REASONS, EffortMessages,
                           JointSelector, Rejected, nearest_turn, rejection, setpoint_arrays,
                           stamp_to_ns, trajectory_point_count, trajectory_process)
@@ -98,98 +101,6 @@ it. Ctrl-C or SIGTERM stop it (exit status 0).
 Documentation: docs/node.md (topics, parameters, diagnostics) and README.md (the
 mechanism parameter file) of the cog_id_ros package.
 """
-
-#: keep-last depth of the control topics: 100 setpoints are 50-100 ms of a 2-1 kHz stream.
-#: Deep enough that a Python pause (garbage collection, a busy core) or a burst from the
-#: setpoint source loses nothing, and that a reliable writer still holds a sample when a
-#: reader asks for it again; shallow enough that a node that cannot keep up drops stale
-#: setpoints instead of queueing them for seconds. Keep-last, not keep-all: a slow reader
-#: never blocks the publisher. Override per topic (depth 1: only the newest setpoint).
-CONTROL_QOS_DEPTH = 100
-
-#: QoS overrides the node honours: the policies and their values (depth: MAX_QOS_DEPTH)
-QOS_OVERRIDE_VALUES = {
-    'history': ('keep_last', 'keep_all', 'system_default'),
-    'reliability': ('reliable', 'best_effort', 'system_default'),
-}
-MAX_QOS_DEPTH = 10_000
-
-
-def control_qos():
-    """The QoS of the control topics (a new profile each call: QoS overrides modify it)."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=CONTROL_QOS_DEPTH,
-                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-
-
-#: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters)
-MECHANISM_PREFIXES = ('mechanism.', 'links.', 'joints.')
-
-TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
-
-#: max_setpoint_step per joint type when the parameter is not given (rad, m)
-DEFAULT_MAX_STEP = {'revolute': 1.0, 'prismatic': 0.1}
-
-#: the node's own parameters: name -> (type, default, description). ``None`` as the default
-#: of effort_limits means "one .inf per active joint" (no limit), of max_setpoint_step "the
-#: default of each active joint's type" (DEFAULT_MAX_STEP).
-NODE_PARAMETERS = {
-    'effort_limits': ('double[]', None,
-                      'per active joint (or one for all), N or N m, > 0: efforts are clipped to '
-                      '+-limit and clipping is counted in diagnostics; .inf: no limit (default)'),
-    'setpoint_timeout': ('double', 0.5,
-                         's without a setpoint after which the stream counts as stopped '
-                         '(timeout_behavior applies, the estimator restarts, the next setpoint '
-                         'may have any stamp); 0: never (stamps must then increase for the '
-                         'whole life of the node); else 0.005 to 3600'),
-    'timeout_behavior': ('string', 'hold',
-                         'what is published on effort_command when the stream stops: '
-                         "'hold' the gravity-holding efforts of the last valid pose, "
-                         "'zero' zeros, 'none' nothing (once per stop)"),
-    'max_setpoint_interval': ('double', 0.1,
-                              's (0.0001 to 3600): setpoints farther apart (by stamp) are not '
-                              'differentiated across the gap; the estimator restarts'),
-    'estimator_window': ('int', 4,
-                         'setpoints in the local polynomial of the acceleration estimator '
-                         '(3..8; 3: least noise, 4: no lag to O(h^2))'),
-    'unwrap_angles': ('bool', True,
-                      'revolute active joints: a setpoint is taken as the 2 pi equivalent '
-                      'nearest the previous accepted one of its stream, so an encoder that '
-                      'wraps from +pi to -pi is not a jump (joint_effort carries the positions '
-                      'as received); false: positions are used as received'),
-    'max_setpoint_step': ('double[]', None,
-                          'per active joint (or one for all), rad or m, > 0: a setpoint that '
-                          'moves an active joint farther than this from the previous accepted '
-                          'one of its stream (after unwrapping) is rejected (jump) and the '
-                          f'estimator restarts; default {DEFAULT_MAX_STEP["revolute"]:g} rad for '
-                          f'revolute, {DEFAULT_MAX_STEP["prismatic"]:g} m for prismatic joints; '
-                          '.inf: no check'),
-    'max_stamp_lead': ('double', 1.0,
-                       's, >= 0: a setpoint stamped farther than this ahead of the node\'s clock '
-                       'is rejected (stamp); .inf: no check'),
-    'max_stamp_rejections': ('int', 5,
-                             'after this many consecutive setpoints rejected because their stamp '
-                             'does not come after the previous accepted one, the estimator '
-                             'restarts and that setpoint starts a new stream (0: never; 0..1000)'),
-    'max_trajectory_points': ('int', 100_000,
-                              'a joint_trajectory with more points is rejected (too_long); '
-                              '1..10000000'),
-    'diagnostics_period': ('double', 1.0, 's between /diagnostics messages (0.05 to 3600)'),
-    'warning_period': ('double', 1.0,
-                       's (0.001 to 3600): each kind of rejected setpoint is logged at most '
-                       'once a period'),
-}
-
-#: (min, max) of the numeric node parameters (periods in s); setpoint_timeout may also be 0
-PARAMETER_BOUNDS = {
-    'setpoint_timeout': (0.005, 3600.0),
-    'max_setpoint_interval': (1e-4, 3600.0),
-    'diagnostics_period': (0.05, 3600.0),
-    'warning_period': (1e-3, 3600.0),
-    'max_stamp_lead': (0.0, math.inf),
-    'estimator_window': (3, 8),
-    'max_stamp_rejections': (0, 1000),
-    'max_trajectory_points': (1, 10_000_000),
-}
 
 #: keys of /diagnostics besides rejected.<reason> and trajectories_rejected.<reason>
 DIAGNOSTIC_KEYS = {
@@ -303,25 +214,27 @@ class CogIdNode(Node):
         lean = PublisherEventCallbacks(use_default_callbacks=False)
         try:
             self.command_pub = self.create_publisher(
-                Float64MultiArray, 'effort_command', control_qos(), event_callbacks=lean,
-                qos_overriding_options=qos_options())
+                Float64MultiArray, TOPICS['effort_command'].name, control_qos(),
+                event_callbacks=lean, qos_overriding_options=qos_options())
             self.effort_pub = self.create_publisher(
-                JointState, 'joint_effort', control_qos(), event_callbacks=lean,
-                qos_overriding_options=qos_options())
+                JointState, TOPICS['joint_effort'].name, control_qos(),
+                event_callbacks=lean, qos_overriding_options=qos_options())
             self.trajectory_pub = self.create_publisher(
-                JointTrajectory, 'effort_trajectory', control_qos(), event_callbacks=lean,
-                qos_overriding_options=qos_options())
-            self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10,
+                JointTrajectory, TOPICS['effort_trajectory'].name, control_qos(),
+                event_callbacks=lean, qos_overriding_options=qos_options())
+            self.diagnostics_pub = self.create_publisher(
+                DiagnosticArray, TOPICS['/diagnostics'].name, DIAGNOSTICS_QOS_DEPTH,
                                                          event_callbacks=lean)
             # The control-rate input: its own thread and wait set, outside the executor (see
             # setpoint_loop.py). start() once the node is built; stop() before destroying it.
             self.setpoint_loop = SetpointLoop(
-                self, JointState, 'joint_setpoint', self.serve_setpoint, control_qos(),
+                self, JointState, TOPICS['joint_setpoint'].name, self.serve_setpoint, control_qos(),
                 lock=self.lock, on_error=self._serve_failed, with_info=True,
                 qos_overriding_options=qos_options())
             # taken serialized: the executor never deserialises a long trajectory (a C call
             # that holds the GIL for seconds); the trajectory process does
-            self.create_subscription(JointTrajectory, 'joint_trajectory', self.on_trajectory,
+            self.create_subscription(JointTrajectory, TOPICS['joint_trajectory'].name,
+                                     self.on_trajectory,
                                      control_qos(), qos_overriding_options=qos_options(),
                                      raw=True)
         except (rclpy.exceptions.ParameterException, RuntimeError, TypeError, ValueError) as exc:
@@ -400,11 +313,10 @@ class CogIdNode(Node):
             if not name.startswith(MECHANISM_PREFIXES + ('qos_overrides.',)) and name not in known:
                 self.get_logger().warning(f"ignoring unknown parameter '{name}'")
         cfg = {}
-        for name, (_, default, description) in NODE_PARAMETERS.items():
-            value = overrides[name] if name in overrides else default
-            value = _check_node_parameter(name, value, active_types)
+        for name, param in NODE_PARAMETERS.items():
+            value = param.check(overrides.get(name, param.default), active_types)
             declared = value.tolist() if isinstance(value, np.ndarray) else value
-            self._declare(name, declared, description)
+            self._declare(name, declared, param.ros_description)
             cfg[name] = value
         return cfg
 
@@ -909,63 +821,6 @@ class TrajectoryWorker:
             self._start_process()
             return ('internal', f'the trajectory process ended ({type(exc).__name__}, exit code '
                                 f'{code}); a new one is started for the next trajectory')
-
-
-def _check_node_parameter(name, value, active_types):
-    """The node parameter ``name`` as the type the node uses; MechanismConfigError if wrong."""
-    n_act = len(active_types)
-
-    def fail(message):
-        raise MechanismConfigError(name, message)
-
-    def number(v):
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            fail(f'must be a number, got {v!r}')
-        return float(v)
-
-    def integer(v):
-        low, high = PARAMETER_BOUNDS[name]
-        if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
-            fail(f'must be an integer from {low} to {high}, got {v!r}')
-        return v
-
-    if name in ('effort_limits', 'max_setpoint_step'):
-        what = 'limit' if name == 'effort_limits' else 'step'
-        if value is None or (isinstance(value, (list, tuple)) and len(value) == 0):
-            if name == 'effort_limits':
-                return np.full(n_act, math.inf)
-            return np.array([DEFAULT_MAX_STEP[t] for t in active_types])
-        if not isinstance(value, (list, tuple)):
-            value = [value]
-        limits = [number(v) for v in value]
-        if len(limits) == 1:
-            limits = limits * n_act
-        if len(limits) != n_act:
-            fail(f'needs one {what} per active joint ({n_act}) or one for all, got {len(limits)}')
-        if not all(lim > 0 for lim in limits):
-            fail(f'every {what} must be > 0 (.inf for none), got {limits}')
-        return np.array(limits)
-    if name == 'timeout_behavior':
-        if value not in TIMEOUT_BEHAVIORS:
-            fail(f"must be one of {', '.join(TIMEOUT_BEHAVIORS)}, got {value!r}")
-        return value
-    if name == 'unwrap_angles':
-        if not isinstance(value, bool):
-            fail(f'must be true or false, got {value!r}')
-        return value
-    if name in ('estimator_window', 'max_stamp_rejections', 'max_trajectory_points'):
-        return integer(value)
-    value = number(value)
-    low, high = PARAMETER_BOUNDS[name]
-    if name == 'setpoint_timeout' and value == 0.0:
-        return value
-    if name == 'max_stamp_lead' and value == math.inf:
-        return value
-    if not low <= value <= high:
-        extra = ' (or 0: no timeout)' if name == 'setpoint_timeout' else \
-            ' (or .inf: no check)' if name == 'max_stamp_lead' else ''
-        fail(f'must be from {low:g} to {high:g} s{extra}, got {value!r}')
-    return value
 
 
 def main(args=None):

@@ -30,7 +30,7 @@ from sensor_msgs.msg import JointState
 
 from . import stop_signals
 from ..offline import trajectory_io
-from .node import control_qos
+from .topics import control_qos
 from .conversions import NANOSECONDS, stamp_to_ns
 
 #: the recorder must not drop what the node sends while the player is busy publishing

@@ -1,0 +1,322 @@
+"""The node's own parameters, written once: name, type, default, bounds and meaning.
+
+``NODE_PARAMETERS`` is the one table. The node declares every entry read-only with its
+description and checks every value with :meth:`NodeParameter.check`; docs/node.md's
+parameter table is generated from it (a test compares the two)::
+
+    python -m cog_id_ros.ros.parameters --markdown          # print the table
+    python -m cog_id_ros.ros.parameters --write docs/node.md  # refresh it in the docs
+
+``OTHER_PARAMETERS`` lists what the table of the docs shows besides the node's own (the
+mechanism, ``use_sim_time``, QoS overrides), declared by rclpy or from the mechanism.
+Plain Python: importing this needs no ROS.
+"""
+import argparse
+import dataclasses
+import math
+import sys
+from typing import Any, Callable, Sequence
+
+from ..core import MechanismConfigError
+
+#: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters)
+MECHANISM_PREFIXES = ('mechanism.', 'links.', 'joints.')
+
+TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
+
+#: max_setpoint_step per joint type when the parameter is not given (rad, m)
+DEFAULT_MAX_STEP = {'revolute': 1.0, 'prismatic': 0.1}
+
+#: QoS overrides the node honours: the policies and their values (depth: 1..MAX_QOS_DEPTH)
+QOS_OVERRIDE_VALUES = {
+    'history': ('keep_last', 'keep_all', 'system_default'),
+    'reliability': ('reliable', 'best_effort', 'system_default'),
+}
+MAX_QOS_DEPTH = 10_000
+
+
+@dataclasses.dataclass(frozen=True)
+class NodeParameter:
+    """One parameter of the node.
+
+    ``kind`` says how a value is checked: ``'number'`` (a float from ``low`` to ``high``,
+    or ``special``), ``'integer'`` (an int from ``low`` to ``high``), ``'choice'`` (one of
+    ``choices``), ``'bool'``, or ``'per_joint'`` (one positive float per active joint or one
+    for all; ``None`` or an empty list: ``per_joint_default``). ``description`` is the
+    meaning (markdown: the docs' table; the node's ParameterDescriptor without backticks);
+    ``default_text`` the docs' default column where ``default`` alone does not say it.
+    """
+
+    name: str
+    type: str
+    default: Any
+    kind: str
+    description: str
+    unit: str = ''
+    low: float | None = None
+    high: float | None = None
+    special: tuple[float, str] | None = None   # (value, what it means) allowed besides bounds
+    choices: tuple[str, ...] = ()
+    per_joint_default: Callable[[str], float] | None = None   # joint type -> default
+    what: str = ''                                             # 'limit', 'step' in messages
+    default_text: str = ''
+
+    def check(self, value: Any, active_types: Sequence[str]) -> Any:
+        """``value`` as the node uses it (per_joint: a numpy array); MechanismConfigError
+        naming the parameter when it cannot be honoured."""
+        return _CHECKS[self.kind](self, value, list(active_types))
+
+    def fail(self, message: str):
+        raise MechanismConfigError(self.name, message)
+
+    @property
+    def ros_description(self) -> str:
+        """The description as the node declares it (``ros2 param describe``)."""
+        return self.description.replace('`', '')
+
+    def bounds_text(self) -> str:
+        """The accepted values, for the docs' table."""
+        if self.kind == 'choice':
+            return ', '.join(f'`{c}`' for c in self.choices)
+        if self.kind == 'bool':
+            return 'true, false'
+        if self.kind == 'per_joint':
+            return '> 0 each (`.inf`: none); one per active joint or one for all'
+        if self.kind == 'integer':
+            text = f'{self.low} to {self.high}'
+        elif self.high == math.inf:
+            text = f'≥ {self.low:g}'
+        else:
+            text = f'{self.low:g} to {self.high:g}'
+        if self.special is not None:
+            text = f'{_number(self.special[0])} ({self.special[1]}), or {text}'
+        return text
+
+    def default_cell(self) -> str:
+        if self.default_text:
+            return self.default_text
+        if isinstance(self.default, bool):
+            return f'`{str(self.default).lower()}`'
+        if isinstance(self.default, str):
+            return f'`{self.default}`'
+        return repr(self.default)
+
+
+def _plain(x):
+    return '.inf' if x == math.inf else f'{x:g}'
+
+
+def _number(x):
+    return '`.inf`' if x == math.inf else f'{x:g}'
+
+
+def _as_number(param, v):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        param.fail(f'must be a number, got {v!r}')
+    return float(v)
+
+
+def _check_number(param, value, active_types):
+    value = _as_number(param, value)
+    if param.special is not None and value == param.special[0]:
+        return value
+    if not param.low <= value <= param.high:
+        extra = ''
+        if param.special is not None:
+            extra = f' (or {_plain(param.special[0])}: {param.special[1]})'
+        param.fail(f'must be from {param.low:g} to {param.high:g} {param.unit}{extra}, '
+                   f'got {value!r}')
+    return value
+
+
+def _check_integer(param, value, active_types):
+    low, high = param.low, param.high
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        param.fail(f'must be an integer from {low} to {high}, got {value!r}')
+    return value
+
+
+def _check_choice(param, value, active_types):
+    if value not in param.choices:
+        param.fail(f"must be one of {', '.join(param.choices)}, got {value!r}")
+    return value
+
+
+def _check_bool(param, value, active_types):
+    if not isinstance(value, bool):
+        param.fail(f'must be true or false, got {value!r}')
+    return value
+
+
+def _check_per_joint(param, value, active_types):
+    import numpy as np
+    n_act = len(active_types)
+    if value is None or (isinstance(value, (list, tuple)) and len(value) == 0):
+        return np.array([param.per_joint_default(t) for t in active_types], dtype=float)
+    if not isinstance(value, (list, tuple)):
+        value = [value]
+    limits = [_as_number(param, v) for v in value]
+    if len(limits) == 1:
+        limits = limits * n_act
+    if len(limits) != n_act:
+        param.fail(f'needs one {param.what} per active joint ({n_act}) or one for all, '
+                   f'got {len(limits)}')
+    if not all(lim > 0 for lim in limits):
+        param.fail(f'every {param.what} must be > 0 (.inf for none), got {limits}')
+    return np.array(limits)
+
+
+_CHECKS = {'number': _check_number, 'integer': _check_integer, 'choice': _check_choice,
+           'bool': _check_bool, 'per_joint': _check_per_joint}
+
+
+def _table(*params: NodeParameter) -> dict[str, NodeParameter]:
+    return {p.name: p for p in params}
+
+
+#: the node's own parameters, in the order they are declared and documented
+NODE_PARAMETERS: dict[str, NodeParameter] = _table(
+    NodeParameter(
+        'effort_limits', 'double[]', None, 'per_joint', what='limit',
+        per_joint_default=lambda joint_type: math.inf, default_text='`.inf` each',
+        description='N m or N, one per active joint or one for all: efforts are clipped to '
+                    '±limit and every clipping is counted in diagnostics (`.inf`: no limit)'),
+    NodeParameter(
+        'setpoint_timeout', 'double', 0.5, 'number', unit='s', low=0.005, high=3600.0,
+        special=(0.0, 'no timeout'),
+        description='s without a setpoint after which the stream counts as stopped: '
+                    '`timeout_behavior` applies once, the estimator restarts and the next '
+                    'setpoint may carry any stamp (and is not a `jump`); 0 disables it (then '
+                    'stamps must increase for the whole life of the node, see '
+                    '`max_stamp_rejections`: to publish nothing at a stop, prefer '
+                    '`timeout_behavior: none`)'),
+    NodeParameter(
+        'timeout_behavior', 'string', 'hold', 'choice', choices=TIMEOUT_BEHAVIORS,
+        description='what is published on `effort_command` when the stream stops, once: '
+                    '`hold` the gravity-holding efforts of the last valid pose (zero velocity '
+                    'and acceleration, clipped to `effort_limits`); `zero` zeros; `none` '
+                    'nothing'),
+    NodeParameter(
+        'max_setpoint_interval', 'double', 0.1, 'number', unit='s', low=1e-4, high=3600.0,
+        description='s: two setpoints whose stamps are farther apart are not differentiated '
+                    'across the gap: the estimator restarts'),
+    NodeParameter(
+        'estimator_window', 'int', 4, 'integer', low=3, high=8,
+        description='setpoints in the local polynomial of the velocity and acceleration '
+                    'estimator (3: least noise, 4: no lag to O(h²); see "Setpoints: the '
+                    'acceleration estimator" below)'),
+    NodeParameter(
+        'unwrap_angles', 'bool', True, 'bool',
+        description='revolute active joints: within a stream, a setpoint is taken as the 2π '
+                    'equivalent nearest the previous accepted one, so an encoder of a '
+                    'continuous joint that wraps from +π to −π is not a jump of 2π (which the '
+                    'estimator would turn into an acceleration of ~2π/h², 1e5 N m and more). '
+                    '`joint_effort` carries the positions as received. The first setpoint of '
+                    'a stream is taken as received. false: positions are used as received'),
+    NodeParameter(
+        'max_setpoint_step', 'double[]', None, 'per_joint', what='step',
+        per_joint_default=lambda joint_type: DEFAULT_MAX_STEP[joint_type],
+        default_text=f'{DEFAULT_MAX_STEP["revolute"]!r} rad revolute, '
+                     f'{DEFAULT_MAX_STEP["prismatic"]!r} m prismatic',
+        description='rad or m: within a stream, a setpoint that moves an active joint farther '
+                    'than this from the previous accepted one (after unwrapping) is rejected '
+                    '(`jump`) and the estimator restarts, so the next setpoint starts a new '
+                    'stream at rest (acceleration 0); `.inf`: no check. Not checked for the '
+                    'first setpoint of a stream (after a timeout, a restart or a gap longer '
+                    'than `max_setpoint_interval`)'),
+    NodeParameter(
+        'max_stamp_lead', 'double', 1.0, 'number', unit='s', low=0.0, high=math.inf,
+        special=(math.inf, 'no check'),
+        description='s: a setpoint stamped farther than this ahead of the node\'s clock is '
+                    'rejected (`stamp`): one far-future stamp (a source whose clock is wrong) '
+                    'would otherwise be served and make every later setpoint come "before" '
+                    'it; `.inf`: no check (nor while the node\'s clock reads 0: '
+                    '`use_sim_time` before the first `/clock`)'),
+    NodeParameter(
+        'max_stamp_rejections', 'int', 5, 'integer', low=0, high=1000,
+        description='when this many setpoints in a row are rejected because their stamp does '
+                    'not come after the previous accepted one (the source\'s clock went back, '
+                    'or restarted), the estimator restarts and that setpoint starts a new '
+                    'stream (counted in `stamp_restarts`; 4 setpoints lost with the default); '
+                    '0: never (the stream then waits for `setpoint_timeout`)'),
+    NodeParameter(
+        'max_trajectory_points', 'int', 100_000, 'integer', low=1, high=10_000_000,
+        description='a `joint_trajectory` with more points is rejected (`too_long`) from its '
+                    'header alone, before it costs anything. 100,000 points take about 4-8 s '
+                    'to solve on the reference VM'),
+    NodeParameter(
+        'diagnostics_period', 'double', 1.0, 'number', unit='s', low=0.05, high=3600.0,
+        description='s between `/diagnostics` messages'),
+    NodeParameter(
+        'warning_period', 'double', 1.0, 'number', unit='s', low=1e-3, high=3600.0,
+        description='s: each kind of rejected setpoint is logged at most once a period (with '
+                    'the number left out)'),
+)
+
+#: rows of the docs' table for parameters the node does not declare from NODE_PARAMETERS:
+#: (name, type, default, accepted values, meaning)
+OTHER_PARAMETERS = (
+    ('`mechanism.*`, `links.*`, `joints.*`', '', '', '',
+     'the mechanism (README, "Mechanism parameter file")'),
+    ('`use_sim_time`', 'bool', '`false`', 'true, false',
+     'rclpy\'s: the node\'s clock from `/clock` (stamps of zero, `max_stamp_lead`, the stamp '
+     'of `/diagnostics`); read-only like the rest'),
+    ('`qos_overrides./<topic>.<publisher|subscription>.<history|depth|reliability>`', '', '',
+     f"history {', '.join(f'`{v}`' for v in QOS_OVERRIDE_VALUES['history'])}; reliability "
+     f"{', '.join(f'`{v}`' for v in QOS_OVERRIDE_VALUES['reliability'])}; depth 1 to "
+     f'{MAX_QOS_DEPTH}',
+     'rclpy\'s QoS overrides (see QoS below); anything else: exit status 2, one line'),
+)
+
+
+def markdown_table() -> str:
+    """docs/node.md's parameter table, generated from NODE_PARAMETERS and OTHER_PARAMETERS."""
+    rows = ['| name | type | default | accepted values | meaning |', '|---|---|---|---|---|']
+    for p in NODE_PARAMETERS.values():
+        unit = f', {p.unit}' if p.unit else ''
+        rows.append(f'| `{p.name}` | {p.type}{unit} | {p.default_cell()} | {p.bounds_text()} '
+                    f'| {p.description} |')
+    for name, kind, default, accepted, meaning in OTHER_PARAMETERS:
+        rows.append(f'| {name} | {kind} | {default} | {accepted} | {meaning} |'
+                    .replace('<publisher|subscription>', '<publisher\\|subscription>')
+                    .replace('<history|depth|reliability>', '<history\\|depth\\|reliability>'))
+    return '\n'.join(rows) + '\n'
+
+
+def replace_generated(text: str, name: str, table: str) -> str:
+    """``text`` with the block between the markers of ``name`` replaced by ``table``."""
+    begin = f'<!-- generated: {name} (do not edit; see its --write) -->\n'
+    end = f'<!-- end of generated: {name} -->'
+    if begin not in text or end not in text:
+        raise ValueError(f'the markers of {name} are missing')
+    head, rest = text.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    return head + begin + table + end + tail
+
+
+def generated_block(text: str, name: str) -> str:
+    """The block between the markers of ``name`` in ``text`` (as replace_generated writes)."""
+    begin = f'<!-- generated: {name} (do not edit; see its --write) -->\n'
+    end = f'<!-- end of generated: {name} -->'
+    return text.split(begin, 1)[1].split(end, 1)[0]
+
+
+def docs_main(name: str, table: str, argv: Sequence[str] | None) -> int:
+    """``--markdown``: print ``table``; ``--write FILE``: refresh it in FILE (docs/node.md)."""
+    parser = argparse.ArgumentParser(prog=f'python -m {name}',
+                                     description=f'The table of {name} as markdown.')
+    parser.add_argument('--markdown', action='store_true', help='print the table')
+    parser.add_argument('--write', metavar='FILE', help='replace the table in FILE')
+    args = parser.parse_args(argv)
+    if args.write:
+        with open(args.write, encoding='utf-8') as stream:
+            text = stream.read()
+        with open(args.write, 'w', encoding='utf-8') as stream:
+            stream.write(replace_generated(text, name, table))
+    if args.markdown or not args.write:
+        sys.stdout.write(table)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(docs_main('cog_id_ros.ros.parameters', markdown_table(), sys.argv[1:]))

@@ -1,0 +1,91 @@
+"""The node's topics, written once: name, message type, direction, QoS and meaning.
+
+``TOPICS`` is the one table: the node creates its publishers and subscriptions with these
+names and QoS, and docs/node.md's topic table is generated from it (a test compares)::
+
+    python -m cog_id_ros.ros.topics --markdown
+    python -m cog_id_ros.ros.topics --write docs/node.md
+
+Importing this needs no ROS; :func:`control_qos` imports rclpy when it is called.
+"""
+import dataclasses
+import sys
+
+from .parameters import docs_main
+
+#: keep-last depth of the control topics: 100 setpoints are 50-100 ms of a 2-1 kHz stream.
+#: Deep enough that a Python pause (garbage collection, a busy core) or a burst from the
+#: setpoint source loses nothing, and that a reliable writer still holds a sample when a
+#: reader asks for it again; shallow enough that a node that cannot keep up drops stale
+#: setpoints instead of queueing them for seconds. Keep-last, not keep-all: a slow reader
+#: never blocks the publisher. Override per topic (depth 1: only the newest setpoint).
+CONTROL_QOS_DEPTH = 100
+#: keep-last depth of /diagnostics (rclpy's default profile otherwise)
+DIAGNOSTICS_QOS_DEPTH = 10
+
+
+def control_qos():
+    """The QoS of the control topics (a new profile each call: QoS overrides modify it)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=CONTROL_QOS_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+@dataclasses.dataclass(frozen=True)
+class Topic:
+    """One topic of the node. ``qos``: 'control' (:func:`control_qos`, overridable) or
+    'diagnostics' (keep-last DIAGNOSTICS_QOS_DEPTH, not overridable)."""
+
+    name: str
+    type: str
+    direction: str
+    qos: str
+    description: str
+
+
+_CONTROL = 'control'
+
+#: the node's topics, in the order they are documented
+TOPICS: dict[str, Topic] = {t.name: t for t in (
+    Topic('joint_setpoint', 'sensor_msgs/JointState', 'in', _CONTROL,
+          'names must include every active joint (any order; extra names ignored); '
+          '`position` required; `velocity` optional (empty: estimated, see "Setpoints: the '
+          'acceleration estimator"); `effort` ignored'),
+    Topic('joint_trajectory', 'trajectory_msgs/JointTrajectory', 'in', _CONTROL,
+          'a whole trajectory, at most `max_trajectory_points` points: positions, velocities '
+          'and accelerations per point (velocities/accelerations may be left out on every '
+          'point, then they are estimated as the offline tool does, 5+ points, after '
+          'unwrapping revolute joints)'),
+    Topic('effort_command', 'std_msgs/Float64MultiArray', 'out', _CONTROL,
+          'one per accepted setpoint: efforts in `mechanism.active_joints` order'),
+    Topic('joint_effort', 'sensor_msgs/JointState', 'out', _CONTROL,
+          'one per accepted setpoint: active joint names, the setpoint\'s header (stamp and '
+          'frame, unchanged), the positions **as received** (not unwrapped) and the '
+          'velocities used (given or estimated), the efforts'),
+    Topic('effort_trajectory', 'trajectory_msgs/JointTrajectory', 'out', _CONTROL,
+          'the received trajectory (same header, same `time_from_start`, positions as '
+          'received), active joints only in `active_joints` order, with `effort` filled on '
+          'every point; computed in one vectorised solver call in the node\'s trajectory '
+          'process'),
+    Topic('/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'out', 'diagnostics',
+          'once a `diagnostics_period`, see "Diagnostics" below'),
+)}
+
+
+def qos_text(topic: Topic) -> str:
+    if topic.qos == _CONTROL:
+        return f'reliable, keep-last {CONTROL_QOS_DEPTH}, volatile (overridable)'
+    return f'reliable, keep-last {DIAGNOSTICS_QOS_DEPTH}'
+
+
+def markdown_table() -> str:
+    """docs/node.md's topic table, generated from TOPICS."""
+    rows = ['| topic | type | dir | QoS | what |', '|---|---|---|---|---|']
+    for t in TOPICS.values():
+        rows.append(f'| `{t.name}` | {t.type} | {t.direction} | {qos_text(t)} | '
+                    f'{t.description} |')
+    return '\n'.join(rows) + '\n'
+
+
+if __name__ == '__main__':
+    sys.exit(docs_main('cog_id_ros.ros.topics', markdown_table(), sys.argv[1:]))
