@@ -1,7 +1,14 @@
-"""Finite-difference derivatives of sampled trajectories on uneven time grids (pure numpy).
+"""Missing velocities and accelerations: the rule, and the scheme for whole trajectories.
 
-The scheme used by ``cog_id_torques`` when a CSV trajectory lacks velocity or
-acceleration columns:
+**The rule** (one place: :func:`estimates`; docs/derivatives.md): a velocity that is not
+given is estimated from the positions; an acceleration that is not given is estimated from
+the *given* velocities when there are any, else from the positions. ``cog_id_torques``
+(per CSV column) and cog_id_node's ``joint_trajectory`` both call :func:`fill_in`, which
+applies it with the scheme below; the node's setpoint stream applies the same rule causally
+(:mod:`cog_id_ros.ros.setpoint_filter`, which cannot use samples that have not come yet).
+The Python API does not estimate: ``torques(q)`` takes missing ``qd`` and ``qdd`` as zeros.
+
+The scheme for a whole trajectory (pure numpy, uneven time grids):
 
 * Every derivative at sample ``i`` is the derivative, at ``t[i]``, of the polynomial
   of degree 4 that interpolates 5 neighbouring samples. The stencil is centred
@@ -28,6 +35,8 @@ lies beyond the range of a double (e.g. positions that change by 1 over steps of
 give accelerations of 1e600) comes out as +-inf or NaN, for the caller to check with
 ``np.isfinite``.
 """
+
+from typing import Callable
 
 import numpy as np
 
@@ -132,3 +141,44 @@ def first_derivative(t, y):
 def second_derivative(t, y):
     """Acceleration from positions: O(h^3) (O(h^4) inside an even grid)."""
     return derivative(t, y, 2)
+
+
+#: what a missing derivative is estimated from: (given quantity, order of the derivative)
+FROM_POSITIONS_1 = ('position', 1)
+FROM_POSITIONS_2 = ('position', 2)
+FROM_VELOCITIES_1 = ('velocity', 1)
+
+
+def estimates(velocity_given: bool, acceleration_given: bool) -> dict[str, tuple[str, int]]:
+    """The rule: {missing quantity: (what it is estimated from, derivative order)}.
+
+    A missing velocity comes from the positions; a missing acceleration from the given
+    velocities, or from the positions when no velocities are given. Given quantities are
+    used as they are and never estimated.
+    """
+    plan = {}
+    if not velocity_given:
+        plan['velocity'] = FROM_POSITIONS_1
+    if not acceleration_given:
+        plan['acceleration'] = FROM_VELOCITIES_1 if velocity_given else FROM_POSITIONS_2
+    return plan
+
+
+def fill_in(t, q, qd=None, qdd=None,
+            check: Callable[[str, str, np.ndarray], None] | None = None):
+    """(qd, qdd) of a sampled trajectory: given ones as they are, missing ones estimated.
+
+    ``t`` (N,), ``q`` and the given ``qd``/``qdd`` of shape (N,) or (N, K); ``None`` marks a
+    missing one. Missing ones follow :func:`estimates` with the scheme of
+    :func:`derivative` (needs ``STENCIL`` samples, increasing ``t``; ``ValueError``
+    otherwise). ``check(quantity, source, values)``, optional, sees each estimate in turn
+    (velocity first) and may raise, e.g. for values beyond the range of a double.
+    """
+    given = {'position': q, 'velocity': qd}
+    out = {'velocity': qd, 'acceleration': qdd}
+    for quantity, (source, order) in estimates(qd is not None, qdd is not None).items():
+        values = derivative(t, given[source], order)
+        if check is not None:
+            check(quantity, source, values)
+        out[quantity] = values
+    return out['velocity'], out['acceleration']

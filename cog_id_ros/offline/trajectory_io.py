@@ -6,7 +6,7 @@ per sample, comma-separated, UTF-8 (a byte-order mark is allowed; cells may be q
 * ``time``: seconds, strictly increasing (not necessarily even steps or from 0).
 * For each active joint ``J``: ``J.position`` (required), ``J.velocity`` and
   ``J.acceleration`` (optional: estimated from the samples when absent, see
-  :mod:`cog_id_ros.derivatives`). Angles in radians, not wrapped (``cog_id_torques
+  :mod:`cog_id_ros.offline.derivatives`). Angles in radians, not wrapped (``cog_id_torques
   --unwrap`` unwraps them with :func:`unwrap_positions`).
 * ``J.position|velocity|acceleration`` columns of a joint of the mechanism that is not
   active are ignored (with a note); the same suffixes on a name that is not a joint of
@@ -28,6 +28,7 @@ failed run leaves no partial file and never clobbers an older one.
 
 import contextlib
 import csv
+import functools
 import math
 import os
 import re
@@ -66,7 +67,9 @@ class TrajectoryError(ValueError):
         self.path = str(path)
         self.row = row
         self.column = column
-        self.line = line if line is not None else (row + 1 if row is not None else (1 if header else None))
+        if line is None:
+            line = row + 1 if row is not None else (1 if header else None)
+        self.line = line
         self.reason = message
         where = []
         if row is not None:
@@ -196,7 +199,8 @@ def _name_list(names):
 
 def _quoted(text, quote=True):
     """A cell for a message: repr-quoted, cut to _MAX_QUOTED characters."""
-    short = text if len(text) <= _MAX_QUOTED else text[:_MAX_QUOTED] + f'... ({len(text):,} characters)'
+    short = text if len(text) <= _MAX_QUOTED else \
+        text[:_MAX_QUOTED] + f'... ({len(text):,} characters)'
     return repr(short) if quote else short
 
 
@@ -221,7 +225,8 @@ def _check_cell_counts(path, lines, n_columns):
 def _raise_cell_count(path, row, line, found, expected):
     if not line.strip():
         raise TrajectoryError(path, 'blank line between data rows', row=row)
-    raise TrajectoryError(path, f'expected {expected} cells like the header, found {found}', row=row)
+    raise TrajectoryError(path, f'expected {expected} cells like the header, found {found}',
+                          row=row)
 
 
 def _parse_cell(text):
@@ -301,15 +306,16 @@ def read_trajectory(path, joints, active_joints):
     else:
         _check_cell_counts(path, lines, len(names))
         try:
-            data = np.loadtxt(lines[1:], delimiter=',', comments=None, usecols=[i for _, i in order],
-                              dtype=float, ndmin=2)
+            data = np.loadtxt(lines[1:], delimiter=',', comments=None,
+                              usecols=[i for _, i in order], dtype=float, ndmin=2)
         except ValueError as e:
             _locate_bad_cell(path, lines, len(names), order, str(e))
     finite = np.isfinite(data)
     if not finite.all():
         bad_row, bad_col = (int(i) for i in np.argwhere(~finite)[0])
         cell = _cells(lines[bad_row + 1])[order[bad_col][1]]
-        raise _non_finite(path, bad_row + 1, order[bad_col][0], float(data[bad_row, bad_col]), cell)
+        raise _non_finite(path, bad_row + 1, order[bad_col][0], float(data[bad_row, bad_col]),
+                          cell)
     columns = {name: np.ascontiguousarray(data[:, j]) for j, (name, _) in enumerate(order)}
     time = columns.pop(TIME)
     steps = np.diff(time)
@@ -403,11 +409,11 @@ def kept_pieces(keep, max_gap=1):
 def setpoints(traj, active_joints, keep=None):
     """Positions, velocities and accelerations (N, M) of the active joints.
 
-    Absent velocity and acceleration columns are estimated with
-    :mod:`cog_id_ros.derivatives`: a velocity from the positions; an acceleration from
-    the velocity column when the file has one, else from the positions. ``keep`` (N,)
-    bool, optional: only these rows are used for (and get) estimates; the others (rows
-    skipped before solving) get velocity and acceleration 0. Estimates span a single
+    Absent velocity and acceleration columns are estimated by the package's one rule,
+    :func:`cog_id_ros.offline.derivatives.fill_in`: a velocity from the positions; an
+    acceleration from the velocity column when the file has one, else from the positions.
+    ``keep`` (N,) bool, optional: only these rows are used for (and get) estimates; the
+    others (rows skipped before solving) get velocity and acceleration 0. Estimates span a single
     dropped row but not two or more: the kept rows are differentiated in pieces
     (:func:`kept_pieces`; one-sided stencils at the ends of each piece), and every piece
     needs ``derivatives.STENCIL`` rows. Returns ``(q, qd, qdd, estimated)`` where
@@ -455,15 +461,15 @@ def setpoints(traj, active_joints, keep=None):
             estimated.append(joint_column(joint, 'acceleration'))
         else:
             qdd[:, k] = acc
+        if vel is not None and acc is not None:
+            continue
         for rows in pieces:
-            time = traj.time[rows]
-            if vel is None:
-                qd[rows, k] = _estimate(traj.path, time, pos[rows], 1, rows, joint, 'velocity')
-            if acc is None and vel is None:
-                qdd[rows, k] = _estimate(traj.path, time, pos[rows], 2, rows, joint, 'acceleration')
-            elif acc is None:
-                qdd[rows, k] = _estimate(traj.path, time, vel[rows], 1, rows, joint,
-                                         'acceleration', source='velocity')
+            v, a = derivatives.fill_in(
+                traj.time[rows], pos[rows], None if vel is None else vel[rows],
+                None if acc is None else acc[rows],
+                check=functools.partial(_check_estimate, traj.path, rows, joint))
+            qd[rows, k] = v
+            qdd[rows, k] = a
     return q, qd, qdd, estimated
 
 
@@ -482,8 +488,8 @@ def _check_steps(path, time, rows, column):
             row=int(rows[k]) + 1, column=TIME)
 
 
-def _estimate(path, time, values, order, rows, joint, field, source='position'):
-    result = derivatives.derivative(time, values, order)
+def _check_estimate(path, rows, joint, field, source, result):
+    """An estimate of derivatives.fill_in beyond the range of a double: TrajectoryError."""
     finite = np.isfinite(result)
     if not finite.all():
         k = int(np.argmin(finite))
@@ -492,7 +498,6 @@ def _estimate(path, time, values, order, rows, joint, field, source='position'):
             path, f'the estimated {joint_column(joint, field)} here is beyond the range of a '
             f'double: the {source}s change too much for the time steps; give the '
             f'{joint_column(joint, field)} column', row=int(rows[k]) + 1, column=col)
-    return result
 
 
 class OutputPathError(OSError):

@@ -24,7 +24,7 @@ REASONS = {
     'non_finite': 'a position, velocity or acceleration of an active joint is NaN or infinite',
     'out_of_range': 'a finite value too large to compute with (the torques would overflow)',
     'stamp': 'the header stamp does not come after the previous accepted setpoint, or is '
-             'more than max_stamp_lead ahead of the node\'s clock',
+             "more than max_stamp_lead ahead of the node's clock",
     'jump': 'an active joint moved farther than max_setpoint_step since the previous '
             'setpoint (after unwrapping revolute joints)',
     'closure': 'the loops cannot be closed at this pose',
@@ -150,8 +150,9 @@ def trajectory_arrays(msg, selector, unwrap=None, max_step=None):
     """(time_from_start (N,), q (N, M), qd (N, M), qdd (N, M)) of a JointTrajectory.
 
     Every point needs positions; velocities and accelerations are either on every point
-    or on none (then estimated from the positions over time_from_start, the scheme of
-    :mod:`cog_id_ros.derivatives`, which needs 5 or more points). Raises Rejected.
+    or on none (then estimated over time_from_start by the package's one rule,
+    :func:`cog_id_ros.offline.derivatives.fill_in`, as the offline tool does: 5 or more
+    points). Raises Rejected.
 
     ``unwrap`` (M booleans, optional): those columns (revolute joints) are unwrapped
     before they are differentiated, each point taken as the 2 pi equivalent nearest the
@@ -195,11 +196,7 @@ def trajectory_arrays(msg, selector, unwrap=None, max_step=None):
             raise Rejected('malformed', 'trajectory without velocities or accelerations needs '
                            f'{derivatives.STENCIL} or more points with increasing time_from_start '
                            'to estimate them')
-        if qd is None:
-            qd = derivatives.first_derivative(times, q_used)
-        if qdd is None:
-            qdd = derivatives.second_derivative(times, q_used) if fields['velocities'] is None \
-                else derivatives.first_derivative(times, qd)
+        qd, qdd = derivatives.fill_in(times, q_used, qd, qdd)   # the package's one rule
     return times, q, qd, qdd
 
 
@@ -348,8 +345,8 @@ def trajectory_process(conn, config):
     from ..core import InverseDynamics, Mechanism
     solver = InverseDynamics(Mechanism.from_parameters(config['mechanism']))
     selector = JointSelector(config['active_joints'])
-    options = dict(unwrap=config['unwrap'], max_step=config['max_step'],
-                   effort_limits=config['effort_limits'], max_points=config['max_points'])
+    options = {'unwrap': config['unwrap'], 'max_step': config['max_step'],
+               'effort_limits': config['effort_limits'], 'max_points': config['max_points']}
     while True:
         try:
             raw = conn.recv_bytes()
