@@ -4,10 +4,13 @@
 
 For each mechanism: the median time of one single-sample call (successive setpoints along a
 smooth motion at 1 kHz, as a control loop would call it) and the throughput of one call on
-10,000 samples. The single-sample time is measured for the straight-line code the solver
-uses (core/sample_program.py) and, in alternating blocks of 500 setpoints on a second
-solver, for the general lane path it falls back to (redundant mechanisms use only the general path).
-Targets (2-core machine): four-bar single sample < 50 us, batch > 200,000 samples/s.
+10,000 samples. The single-sample time is measured for ``backend='python'`` (traced
+straight-line kernels, what 'auto' picks) and, in alternating blocks of 500 setpoints on a
+second solver, for ``backend='reference'`` (the lane code on floats). Redundantly actuated
+mechanisms (paper_four_bar_b, five_bar_redundant) run through the same kernels; the last
+column is each mechanism's single-sample time over paper_four_bar_a's.
+Targets (2-core machine): four-bar single sample < 50 us, batch > 200,000 samples/s,
+redundant mechanisms within 2x of paper_four_bar_a.
 """
 import os
 import statistics
@@ -41,9 +44,8 @@ def motion(mech, n, duration):
 def bench(path, repeats=5):
     mech = cog_id_ros.Mechanism.from_params_file(path)
     q, qd, qdd = motion(mech, 10_000, 10.0)      # 1 kHz
-    solver = cog_id_ros.InverseDynamics(mech)
-    general = cog_id_ros.InverseDynamics(mech)
-    general._program = None
+    solver = cog_id_ros.InverseDynamics(mech, backend='python')
+    general = cog_id_ros.InverseDynamics(mech, backend='reference')
     samples, general_samples = [], []
     for block in range(6):          # alternate blocks of 500 setpoints between the two paths
         for i in range(500 * block, 500 * (block + 1)):
@@ -66,15 +68,17 @@ def bench(path, repeats=5):
 
 def main():
     names = [n for n in ('paper_four_bar_a', 'paper_four_bar_b', 'slider_crank', 'five_bar',
-                         'spatial_rsur') if os.path.exists(os.path.join(ROOT, 'config', n + '.yaml'))]
+                         'five_bar_redundant', 'spatial_rsur') if os.path.exists(os.path.join(ROOT, 'config', n + '.yaml'))]
     print('command: ./dev bench   (bench/bench_core.py)')
-    print(f"{'mechanism':22s} {'joints':>6} {'DOF':>4} {'M':>3} {'single [us]':>12} "
-          f"{'general [us]':>13} {'ratio':>6} {'batch [samples/s]':>18}")
+    print(f"{'mechanism':22s} {'joints':>6} {'DOF':>4} {'M':>3} {'python [us]':>12} "
+          f"{'reference [us]':>15} {'ratio':>6} {'batch [samples/s]':>18} {'vs (a)':>7}")
+    first = None
     for name in names:
         mech, (single, general), rate = bench(os.path.join(ROOT, 'config', name + '.yaml'))
+        first = first or single
         print(f'{name:22s} {len(mech.joints):6d} {mech.dof:4d} {len(mech.active_joints):3d} '
-              f'{single * 1e6:12.1f} {general * 1e6:13.1f} {general / single:6.1f} {rate:18,.0f}',
-              flush=True)
+              f'{single * 1e6:12.1f} {general * 1e6:15.1f} {general / single:6.1f} {rate:18,.0f} '
+              f'{single / first:7.2f}', flush=True)
 
 
 if __name__ == '__main__':

@@ -85,14 +85,16 @@ def prediction(mechanism, state, goal):
     """The first-order predictor ``q + V dz`` (primary actuators at ``goal``) and the
     increment of every joint it makes."""
     q, basis = state
-    dz = [goal[a] - q[j] for a, j in zip(mechanism.primary, mechanism.primary_joints)]
-    if len(dz) == 1:
-        d = dz[0]
+    pairs = mechanism.primary_pairs
+    if len(pairs) == 1:
+        (a, j), = pairs
+        d = goal[a] - q[j]
         moved = [row[0] * d for row in basis]
     else:
+        dz = [goal[a] - q[j] for a, j in pairs]
         moved = [sum(b * d for b, d in zip(row, dz)) for row in basis]
     predicted = [x + dx for x, dx in zip(q, moved)]
-    for a, j in zip(mechanism.primary, mechanism.primary_joints):
+    for a, j in pairs:
         predicted[j] = goal[a]
     return predicted, moved
 
@@ -105,7 +107,7 @@ def fits_one_step(mechanism, limits, state, target, moved):
     the others follow from the closure, and the projection takes care of their targets
     (an inconsistent target would otherwise never be "reached")."""
     q = state[0]
-    for a, j in zip(mechanism.primary, mechanism.primary_joints):
+    for a, j in mechanism.primary_pairs:
         if not abs(target[a] - q[j]) <= limits[j]:
             return False
     for dx, lim in zip(moved, limits):

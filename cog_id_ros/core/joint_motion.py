@@ -32,7 +32,7 @@ def velocity_basis(mechanism, sol):
     return basis
 
 
-def projection_gram(mechanism, basis, ops):
+def projection_gram(mechanism, basis):
     """(V_a^T W^-1 V_a, V_a^T W^-1): the normal equations of the weighted projection."""
     w_inv = mechanism.inverse_torque_weights
     rows = [basis[j] for j in mechanism.active_index]
@@ -53,11 +53,29 @@ def active_velocity_map(mechanism, basis, ops):
             for k, a in enumerate(order):
                 s[j][a] = row[k]
         return s
-    gram, va_t_winv = projection_gram(mechanism, basis, ops)
+    gram, va_t_winv = projection_gram(mechanism, basis)
     x = solve_spd(gram, va_t_winv, ops)                  # dof x M
     dof = mechanism.dof
     m = len(mechanism.active_index)
     return [[sum(row[k] * x[k][a] for k in range(dof)) for a in range(m)] for row in basis]
+
+
+def projection_increment(mechanism, basis, q, target, ops):
+    """Redundant actuation: the Gauss-Newton increment dz (one per primary actuator) towards
+    the closed pose nearest ``target`` in the W^-1 metric, min (q_a - target)^T W^-1
+    (q_a - target); the pose moves by -V dz (:func:`projected_pose`), then closes again."""
+    error = [q[j] - t for j, t in zip(mechanism.active_index, target)]
+    gram, va_t_winv = projection_gram(mechanism, basis)
+    rhs = [[sum(r * e for r, e in zip(row, error))] for row in va_t_winv]
+    return [row[0] for row in solve_spd(gram, rhs, ops)]
+
+
+def projected_pose(mechanism, q, basis, dz):
+    """q - V dz, the primary actuators moved by exactly -dz (before the loops close again)."""
+    moved = [x - sum(b * d for b, d in zip(row, dz)) for x, row in zip(q, basis)]
+    for k, j in enumerate(mechanism.primary_joints):
+        moved[j] = q[j] - dz[k]
+    return moved
 
 
 def closure_drift(mechanism, sol, velocity_map, beta):

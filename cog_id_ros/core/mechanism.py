@@ -380,6 +380,8 @@ class Mechanism:
                 f'positions): the motion is not determined; add active joints')
         self.primary = self._choose_primary(matrix)
         self.primary_joints = [self.active_index[i] for i in self.primary]
+        #: (index into active_joints, joint index) of each primary actuator
+        self.primary_pairs = list(zip(self.primary, self.primary_joints))
         fixed = set(self.primary_joints)
         self.free_joints = [j for j in range(n) if j not in fixed]
         self.inverse_torque_weights = [1.0 / w for w in self.torque_weights]

@@ -9,24 +9,12 @@ mechanism written in 3-D is full of. Here the same code runs once, at load time,
 * equal operations on equal operands are recorded once (common subexpressions);
 * operations no output depends on are dropped;
 
-and ``compile_function`` writes what is left as one Python function of plain float
-statements. The operations that remain are those the float path would do, in the same
+and emitter.py writes what is left as one function of plain float statements. The operations that remain are those the float path would do, in the same
 order, so the results agree with it to the last bit (up to the sign of a zero).
 
 Only branch-free lane code can be traced: a comparison of a ``Sym`` raises TypeError.
 """
 import math
-
-#: ScalarOps.sqrt and .recip as expressions ({0}: the operand)
-_UNARY = {
-    'neg': '-{0}',
-    'sin': 'sin({0})',
-    'cos': 'cos({0})',
-    'sqrt': '(sqrt({0}) if {0} >= 0.0 else nan)',
-    'recip': '(1.0 / {0} if {0} != 0.0 else inf)',
-}
-_BINARY = {'add': '{0} + {1}', 'sub': '{0} - {1}', 'mul': '{0} * {1}', 'div': '{0} / {1}'}
-
 
 class Graph:
     """The recorded operations: node k is (op, operands); operands are node ids or floats."""
@@ -181,26 +169,16 @@ class SymOps:
         return math.nan
 
 
-def _literal(x):
-    x = float(x)
-    if math.isnan(x):
-        return 'nan'
-    if math.isinf(x):
-        return 'inf' if x > 0 else '-inf'
-    text = repr(x)
-    return f'({text})' if x < 0 or text.startswith('-') else text
+def leaves(value):
+    """The Syms and floats of a nested list/tuple structure, depth first."""
+    if isinstance(value, (list, tuple)):
+        return [x for item in value for x in leaves(item)]
+    return [value]
 
 
-def compile_function(name, params, outputs):
-    """A Python function ``name(*params)`` returning the flat tuple ``outputs``.
-
-    params: list of (parameter name, list of input Syms made by ``graph.inputs``) -- each
-    parameter is a sequence unpacked into its inputs; outputs: flat list of Syms or floats.
-    Returns (function, source, number of operations).
-    """
-    graph = next((o.graph for o in outputs if isinstance(o, Sym)), None)
-    if graph is None:
-        graph = next((s.graph for _, syms in params for s in syms), Graph())
+def live_operations(graph, outputs):
+    """Node ids of the operations ``outputs`` depend on, in recording order (inputs excluded);
+    what no output depends on is dropped."""
     live = [False] * len(graph.nodes)
     for o in outputs:
         if isinstance(o, Sym):
@@ -210,29 +188,4 @@ def compile_function(name, params, outputs):
             for a in graph.nodes[k][1]:
                 if isinstance(a, int):
                     live[a] = True
-    names = {}
-    lines = [f'def {name}({", ".join(p for p, _ in params)}):']
-    for p, syms in params:
-        for i, s in enumerate(syms):
-            names[s.k] = f'{p}_{i}'
-        if syms:
-            lines.append(f'    {", ".join(names[s.k] for s in syms)}{"," if len(syms) == 1 else ""}'
-                         f' = {p}')
-
-    def operand(a):
-        return names[a] if isinstance(a, int) else _literal(a)
-
-    count = 0
-    for k, (op, args) in enumerate(graph.nodes):
-        if not live[k] or op == 'in':
-            continue
-        names[k] = f't{k}'
-        template = _UNARY.get(op) or _BINARY[op]
-        lines.append(f'    t{k} = {template.format(*map(operand, args))}')
-        count += 1
-    lines.append(f'    return ({"".join(operand(o.k if isinstance(o, Sym) else o) + ", " for o in outputs)})')
-    source = '\n'.join(lines) + '\n'
-    namespace = {'sin': math.sin, 'cos': math.cos, 'sqrt': math.sqrt,
-                 'inf': math.inf, 'nan': math.nan}
-    exec(compile(source, f'<straight_line {name}>', 'exec'), namespace)   # noqa: S102
-    return namespace[name], source, count
+    return [k for k, (op, _) in enumerate(graph.nodes) if live[k] and op != 'in']

@@ -1,0 +1,260 @@
+"""N samples as one trajectory: the lane code on numpy arrays, checked by the serial rules.
+
+The samples are solved on the branch that sample-by-sample continuation (sample_solve.py)
+reaches, at a fraction of its cost:
+
+1. serial anchors every continuation step of actuator travel;
+2. between them, an interpolated start for every sample, then one vectorised Newton solve
+   of all samples (and the redundant projection) on arrays of shape (N,);
+3. a check of every sample against its predecessor by the serial path's own rules (one
+   continuation step away, a small Newton correction of the first-order prediction), and
+   a serial re-solve, in order, of every sample that fails it;
+4. eqs. (1)-(7) (pipeline.py) on arrays, and the per-sample status (an Evaluation).
+"""
+import heapq
+import math
+
+import numpy as np
+
+from . import closure
+from . import spatial as sp
+from .continuation import correction_ok, fits_one_step, prediction
+from .errors import CogIdError
+from .inputs import check_values, out_of_range
+from .joint_motion import projected_pose, projection_increment, velocity_basis
+from .pipeline import inverse_dynamics
+from .sample_solve import NEWTON_ITERATIONS, PROJECTION_ITERATIONS, PROJECTION_TOLERANCE
+
+
+class Evaluation:
+    """Result of InverseDynamics.evaluate, always batch-shaped (N = 1 for one sample).
+
+    torques (N, M): active-joint torques/forces, 0.0 in rows that are not valid (never NaN)
+    valid (N,): bool
+    errors: list of N entries, None or the exception that made the sample invalid
+    positions (N, n_joints): every joint coordinate, mechanism.joints order
+    active_positions (N, M): the active coordinates used (projected for redundant actuation)
+    closure_residual (N,): max |closure equation| at the solution
+    condition_number (N,): closure Jacobian condition number (see mechanism.max_condition_number)
+    """
+
+    def __init__(self, torques, valid, errors, positions, active_positions, residual, condition):
+        self.torques = torques
+        self.valid = valid
+        self.errors = errors
+        self.positions = positions
+        self.active_positions = active_positions
+        self.closure_residual = residual
+        self.condition_number = condition
+
+
+class BatchPose:
+    """Closed poses of N samples on (N,) lanes: the closure solution, velocity basis,
+    redundant mismatch and condition number."""
+    __slots__ = ('pose', 'basis', 'mismatch', 'condition')
+
+    def __init__(self, pose, basis, mismatch, condition):
+        self.pose, self.basis, self.mismatch, self.condition = pose, basis, mismatch, condition
+
+
+def pose_of(mechanism, positions, mismatch=0.0):
+    """BatchPose at given positions (N, n_joints), nothing solved."""
+    pose = closure.evaluate(mechanism.model, [positions[:, j] for j in range(len(mechanism.joints))],
+                            mechanism.free_joints, sp.ArrayOps)
+    return BatchPose(pose, velocity_basis(mechanism, pose), mismatch,
+                     pose.lsq.condition_number())
+
+
+class Batch:
+    """The batch driver of one mechanism, around its per-sample solver."""
+
+    def __init__(self, mechanism, sample_solver):
+        self.mechanism = mechanism
+        self.serial = sample_solver
+
+    def evaluate(self, state, q, qd, qdd, on_invalid):
+        """(Evaluation of N > 1 samples, new state)."""
+        m = self.mechanism
+        n, n_act = q.shape
+        finite, errors_in = check_values(m, self.serial.wrapping, q, qd, qdd, False)
+        if errors_in and on_invalid == 'raise':
+            raise errors_in[min(errors_in)]
+        if not finite.all():   # bad rows take their neighbours so they do not disturb the rest
+            q, qd, qdd = (np.where(finite[:, None], x, 0.0) for x in (q, qd, qdd))
+            for i in np.flatnonzero(~finite):
+                q[i] = q[i - 1] if i > 0 else [state[0][j] for j in m.active_index]
+        with np.errstate(all='ignore'):
+            poses, positions, ok, errors, new_state = self.positions(state, q, on_invalid,
+                                                                     invalid=~finite)
+            tau = inverse_dynamics(m, poses.pose, poses.basis, columns(qd), columns(qdd),
+                                   sp.ArrayOps)
+            tau = np.column_stack(np.broadcast_arrays(*tau, np.zeros(n))[:-1])
+            residual = np.broadcast_to(poses.pose.residual, (n,)).copy()
+            condition = np.broadcast_to(poses.condition, (n,)).copy()
+        for i, exc in errors_in.items():
+            errors[i] = exc
+        ok &= finite & np.isfinite(tau).all(axis=1)
+        for i in np.flatnonzero(~ok):
+            exc = errors[i]
+            residual[i] = getattr(exc, 'residual', math.inf)
+            condition[i] = getattr(exc, 'condition_number', math.inf)
+            if exc is None:
+                errors[i] = out_of_range(qd[i].tolist(), qdd[i].tolist(), int(i))
+                if on_invalid == 'raise':
+                    raise errors[i]
+        tau[~ok] = 0.0
+        return Evaluation(tau, ok, errors, positions, positions[:, m.active_index], residual,
+                          condition), new_state
+
+    def positions(self, state, qa, on_invalid, invalid=None):
+        """Solve N samples of active coordinates ``qa`` (N, M) from the warm start ``state``.
+
+        Returns (BatchPose, positions (N, n_joints), ok (N,), errors list, new state)."""
+        m = self.mechanism
+        n = len(qa)
+        if n == 0:
+            empty = np.zeros((0, len(m.joints)))
+            return pose_of(m, empty), empty, np.zeros(0, bool), [], state
+        invalid = np.zeros(n, bool) if invalid is None else invalid
+        limits = np.array(self.serial.limits)
+        start = np.array([state[0][j] for j in m.active_index])
+        travel = np.max(np.abs(np.diff(np.vstack([start, qa]), axis=0)) /
+                        limits[m.active_index], axis=1)
+        arc = np.cumsum(travel)
+        is_anchor = np.diff(np.concatenate([[0.0], np.floor(arc)])) > 0
+        is_anchor[-1] = True
+        is_anchor &= ~invalid
+        anchor_q, failed, walk = {}, set(), state
+        for a in np.flatnonzero(is_anchor):      # 1. serial anchors, each from the last
+            try:
+                walk = self.serial.solve(walk, qa[a].tolist(), sample=int(a))[1]
+                anchor_q[a] = walk[0]
+            except CogIdError:
+                failed.add(a)
+        # 2. interpolated start of every sample between its neighbouring anchors (by travel)
+        known = [a for a in np.flatnonzero(is_anchor) if a not in failed]
+        knots_at = np.array([-1] + known)
+        knots_q = np.array([state[0]] + [anchor_q[a] for a in known])
+        knots_arc = np.concatenate([[0.0], arc[known]]) if known else np.array([0.0])
+        nxt = np.minimum(np.searchsorted(knots_at, np.arange(n)), len(knots_at) - 1)
+        prv = np.maximum(nxt - 1, 0)
+        prv = np.where(knots_at[nxt] == np.arange(n), nxt, prv)
+        span = knots_arc[nxt] - knots_arc[prv]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            lam = np.where(span > 0, (arc - knots_arc[prv]) / span, 1.0)
+        lam = np.clip(lam, 0.0, 1.0)[:, None]
+        guess = knots_q[prv] + lam * (knots_q[nxt] - knots_q[prv])
+        guess[:, m.primary_joints] = qa[:, m.primary]
+        poses = self.close(guess, qa)            # what does not close is re-solved below
+        positions = np.column_stack(np.broadcast_arrays(*poses.pose.q, np.zeros(n))[:-1])
+        basis = np.stack([np.column_stack(np.broadcast_arrays(*row, np.zeros(n))[:-1])
+                          for row in poses.basis], axis=1)          # (N, n_joints, dof)
+        ok = (np.broadcast_to(poses.pose.converged, (n,)) &
+              (poses.condition <= m.max_condition_number) &
+              (np.broadcast_to(poses.mismatch, (n,)) <= m.setpoint_tolerance) & ~invalid)
+        ok &= self.continues(state, qa, positions, basis)      # 3. the serial rules
+        errors = [None] * n
+        redone = self.resolve_serially(state, qa, positions, basis, ok, invalid, errors,
+                                       on_invalid)
+        good = np.flatnonzero(ok)
+        if good.size:
+            last = good[-1]
+            positions[~ok] = positions[last]       # keep NaN out of the masked lanes
+            new_state = (positions[last].tolist(), basis[last].tolist())
+        else:
+            positions[:] = state[0]
+            new_state = state
+        if redone or not ok.all():
+            poses = pose_of(m, positions, poses.mismatch)
+        return poses, positions, ok, errors, new_state
+
+    def close(self, guess, qa):
+        """Newton on every sample at once from ``guess`` (N, n_joints), then for redundant
+        actuation the projection onto the setpoints ``qa``."""
+        m = self.mechanism
+        target = columns(qa)
+        pose = closure.solve_closure(m.model, columns(guess), m.free_joints, sp.ArrayOps,
+                                     m.closure_tolerance, max_iter=NEWTON_ITERATIONS)
+        basis = velocity_basis(m, pose)
+        if not m.is_redundant:
+            return BatchPose(pose, basis, 0.0, pose.lsq.condition_number())
+        for _ in range(PROJECTION_ITERATIONS):
+            dz = projection_increment(m, basis, pose.q, target, sp.ArrayOps)
+            if np.all(sp.ArrayOps.maxabs(dz) < PROJECTION_TOLERANCE):
+                break
+            pose = closure.solve_closure(m.model, projected_pose(m, pose.q, basis, dz),
+                                         m.free_joints, sp.ArrayOps, m.closure_tolerance,
+                                         max_iter=NEWTON_ITERATIONS)
+            basis = velocity_basis(m, pose)
+        mismatch = sp.ArrayOps.maxabs([pose.q[j] - t for j, t in zip(m.active_index, target)])
+        return BatchPose(pose, basis, mismatch, pose.lsq.condition_number())
+
+    def continues(self, start_state, qa, positions, basis):
+        """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for
+        i = 0) and within the Newton correction bound of its first-order prediction, i.e.
+        where the serial path would have taken it in one step from there."""
+        m = self.mechanism
+        limits, bounds = np.array(self.serial.limits), np.array(self.serial.bounds)
+        prev_q = np.vstack([np.asarray(start_state[0], float)[None, :], positions[:-1]])
+        prev_basis = np.concatenate([np.asarray(start_state[1], float)[None], basis[:-1]])
+        dz = qa[:, m.primary] - prev_q[:, m.primary_joints]
+        moved = np.einsum('njk,nk->nj', prev_basis, dz)
+        predicted = prev_q + moved
+        predicted[:, m.primary_joints] = qa[:, m.primary]
+        near = (np.abs(qa[:, m.primary] - prev_q[:, m.primary_joints]) <=   # as fits_one_step
+                limits[m.primary_joints])
+        return (near.all(axis=1) & (np.abs(moved) <= limits).all(axis=1) &
+                (np.abs(positions - predicted) <= bounds).all(axis=1))
+
+    def resolve_serially(self, start_state, qa, positions, basis, ok, invalid, errors,
+                         on_invalid):
+        """Re-solve, in order, every sample not ``ok`` by serial continuation from the last
+        good sample before it; a sample after one that changed is checked again. Updates
+        the arrays in place; returns True if any sample was re-solved."""
+        pending = [int(i) for i in np.flatnonzero(~ok)]
+        heapq.heapify(pending)
+        last_good, last_done, redone = -1, -1, False
+        while pending:
+            i = heapq.heappop(pending)
+            if i <= last_done:
+                continue
+            if last_done != i - 1:     # the samples before i were good as they were
+                last_good = i - 1
+            last_done = i
+            previous = start_state if last_good < 0 else \
+                (positions[last_good].tolist(), basis[last_good].tolist())
+            if invalid[i]:
+                if i + 1 < len(ok):
+                    heapq.heappush(pending, i + 1)
+                continue
+            if ok[i] and self.one_step(previous, qa[i], positions[i]):
+                last_good = i                  # still continues from its new predecessor
+                continue
+            before = positions[i].copy()
+            try:
+                solved, solved_basis = self.serial.solve(previous, qa[i].tolist(), sample=i)[1]
+            except CogIdError as exc:
+                errors[i], ok[i] = exc, False
+                if on_invalid == 'raise':
+                    raise
+            else:
+                positions[i], basis[i] = solved, solved_basis
+                ok[i], redone, last_good = True, True, i
+                if np.max(np.abs(positions[i] - before)) <= 1e-9:
+                    continue                    # the same pose: the samples after it stand
+            if i + 1 < len(ok):
+                heapq.heappush(pending, i + 1)
+        return redone
+
+    def one_step(self, state, target, solution):
+        """The serial rule of :meth:`continues` for one sample (lists and arrays of floats)."""
+        m = self.mechanism
+        target = target.tolist()
+        predicted, moved = prediction(m, state, target)
+        return (fits_one_step(m, self.serial.limits, state, target, moved) and
+                correction_ok(solution.tolist(), predicted, self.serial.bounds))
+
+
+def columns(array):
+    """(N, k) array -> list of k lanes of shape (N,)."""
+    return [array[:, a] for a in range(array.shape[1])]

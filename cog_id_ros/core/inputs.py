@@ -1,0 +1,152 @@
+"""What the solver accepts: setpoints checked and turned into floats before any maths.
+
+The input contract (README, "Python API"): ``q`` is required, ``qd`` and ``qdd`` default to
+zeros; one sample is (M,) (a plain number when M = 1), a batch (N, M); anything else is a
+SetpointError with reason 'malformed'; NaN or infinity 'non_finite'; a revolute actuator
+beyond +-MAX_ANGLE rad, or torques that overflow, 'out_of_range'.
+"""
+import math
+
+import numpy as np
+
+from .continuation import MAX_ANGLE
+from .errors import SetpointError
+
+
+def setpoint_arrays(mechanism, q, qd, qdd):
+    """(q, qd, qdd) as float arrays of shape (N, M), and whether it was one sample.
+
+    ``q`` is required; ``qd`` and ``qdd`` default to zeros. One sample is (M,), or a
+    plain number when M = 1. Raises SetpointError (reason 'malformed') for anything else.
+    """
+    names = mechanism.active_joints
+    m = len(names)
+    if q is None:
+        raise SetpointError(f'q: required, one position per active joint {names}')
+    arrays = [float_array(label, value, m) if value is not None else None
+              for label, value in (('q', q), ('qd', qd), ('qdd', qdd))]
+    single = arrays[0].ndim == 1
+    out = []
+    for label, array in zip(('q', 'qd', 'qdd'), arrays):
+        if array is None:
+            out.append(np.zeros((1 if single else arrays[0].shape[0], m)))
+            continue
+        if array.ndim != (1 if single else 2) or array.shape[-1] != m or \
+                (not single and array.shape[0] != arrays[0].shape[0]):
+            expected = f'({m},)' if single else f'({arrays[0].shape[0]}, {m})'
+            raise SetpointError(
+                f'{label}: expected shape {expected} (active joints {names}), got {array.shape}')
+        out.append(array.reshape(1, -1) if single else array)
+    return out[0], out[1], out[2], single
+
+def one_sample(mechanism, wrapping, q, qd, qdd):
+    """(q, qd, qdd) as lists of floats when they are one well-formed sample in range,
+    else None (the general path then reports what is wrong)."""
+    m = len(mechanism.active_joints)
+    if type(q) is list and type(qd) is list and type(qdd) is list and \
+            len(q) == len(qd) == len(qdd) == m:  # what a control loop passes: checked at once
+        every = q + qd + qdd
+        if all(type(x) is float for x in every) and math.isfinite(math.fsum(map(abs, every))) \
+                and all(-MAX_ANGLE <= q[a] <= MAX_ANGLE for a in wrapping):
+            return q, qd, qdd
+    out = []
+    for value in (q, qd, qdd):
+        if value is None:
+            if not out:
+                return None                       # q is required
+            out.append([0.0] * m)
+            continue
+        if type(value) is np.ndarray:            # a row of a float array: one C call
+            if value.ndim != 1 or value.dtype.kind != 'f':
+                return None
+            floats = value.tolist()
+        elif type(value) is list or type(value) is tuple:
+            if not all(type(x) is float or type(x) is int for x in value):
+                return None
+            try:
+                floats = [float(x) for x in value]
+            except OverflowError:
+                return None
+        else:
+            return None
+        if len(floats) != m or not all(map(math.isfinite, floats)):
+            return None
+        out.append(floats)
+    if not all(-MAX_ANGLE <= out[0][a] <= MAX_ANGLE for a in wrapping):
+        return None
+    return out
+
+def check_values(mechanism, wrapping, q, qd, qdd, single):
+    """SetpointError for the first non-finite entry, or revolute position beyond
+    MAX_ANGLE; returns (per-sample bool array, {sample: error})."""
+    finite = np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) & np.isfinite(qdd).all(axis=1)
+    wrapping = wrapping
+    in_range = (np.abs(q[:, wrapping]) <= MAX_ANGLE).all(axis=1) if wrapping else finite
+    errors = {}
+    for i in np.flatnonzero(~(finite & in_range)):
+        where = '' if single else f'sample {i}: '
+        for label, array in (('q', q), ('qd', qd), ('qdd', qdd)):
+            bad = np.flatnonzero(~np.isfinite(array[i]))
+            if bad.size:
+                joint = mechanism.active_joints[bad[0]]
+                errors[int(i)] = SetpointError(
+                    f'{where}{label} of {joint} is {array[i, bad[0]]}: setpoints must be '
+                    f'finite', sample=int(i), reason='non_finite')
+                break
+        else:
+            a = next(a for a in wrapping if not abs(q[i, a]) <= MAX_ANGLE)
+            errors[int(i)] = SetpointError(
+                f'{where}q of {mechanism.active_joints[a]} is {q[i, a]:.6g} rad, beyond '
+                f'+-{MAX_ANGLE:g} rad (there a float no longer holds an angle to better than '
+                f'1e-7 rad): wrap or offset the angle', sample=int(i), reason='out_of_range')
+    return finite & in_range, errors
+
+
+def floats(value):
+    """True for a list of Python floats (what a control loop passes at control rate)."""
+    return type(value) is list and all(type(x) is float for x in value)
+
+
+def float_array(label, value, m):
+    """``value`` as a float array; a plain number is one sample when m == 1. SetpointError
+    (reason 'malformed') for strings, mappings, booleans, ragged or non-numeric input."""
+    if isinstance(value, (str, bytes, dict, bool, np.bool_)) or (
+            not isinstance(value, np.ndarray) and not hasattr(value, '__len__') and
+            not isinstance(value, (int, float, np.number))):
+        raise SetpointError(f'{label}: must be numbers (one per active joint), got '
+                            f'{type(value).__name__}')
+    if isinstance(value, (list, tuple)) and any(
+            isinstance(x, (bool, np.bool_)) or
+            (isinstance(x, (list, tuple)) and any(isinstance(y, (bool, np.bool_)) for y in x))
+            for x in value):
+        raise SetpointError(f'{label}: must be numbers (one per active joint), not booleans')
+    try:
+        raw = np.asarray(value)
+        if raw.dtype.kind not in 'iufO':
+            raise TypeError(f'{raw.dtype} values')
+        if raw.dtype.kind == 'O' and any(x is None for x in raw.ravel().tolist()):
+            raise TypeError('None values')
+        with np.errstate(over='raise'):
+            array = raw.astype(float)
+    except FloatingPointError:
+        raise SetpointError(f'{label}: a value beyond the range of a double',
+                            reason='out_of_range') from None
+    except Exception as exc:   # noqa: BLE001 (whatever a strange object's __float__ raises)
+        raise SetpointError(f'{label}: must be numbers (one per active joint), not '
+                            f'{type(exc).__name__}: {exc}') from None
+    if array.ndim == 0:
+        if m != 1:
+            raise SetpointError(f'{label}: a single number is a setpoint for one active joint; '
+                                f'this mechanism has {m}: give one number per active joint')
+        array = array.reshape(1)
+    return array
+
+
+def out_of_range(qd, qdd, sample):
+    """SetpointError(reason='out_of_range') for finite input whose torques overflow."""
+    where = '' if sample is None else f'sample {sample}: '
+    largest = max([abs(x) for x in list(qd) + list(qdd)] or [0.0])
+    return SetpointError(
+        f'{where}the torques are not finite at this setpoint: the velocities or '
+        f'accelerations (largest magnitude {largest:.3g}) are too large to compute with',
+        sample=sample, reason='out_of_range')

@@ -1,0 +1,112 @@
+"""The paper's method at one closed pose, eq. (1) to eq. (7), in the order it is applied.
+
+    closed pose q, velocity basis V        closure.py, joint_motion.py (given)
+    qdot = S thetadot_m                    joint-rate map S              joint_motion.py
+    q_i = g_i(theta_m)                     (1) COG poses                 cog_jacobian.py
+    G_i = dg_i / dtheta_m                  (3) COG Jacobians             cog_jacobian.py
+    qdot_i = G_i thetadot_m                (2) COG velocities            cog_jacobian.py
+    qddot_i = G_i thetaddot_m + Gdot_i thetadot_m   (4) COG accelerations  cog_jacobian.py
+    F_i = M_i qddot_i + b_i                (5) Newton-Euler              newton_euler.py
+    tau_m = sum_i G_i^T F_i                (6)-(7)                        here
+          = H(theta_m) thetaddot_m + B(theta_m, thetadot_m)
+
+:func:`inverse_dynamics` is that table as code. Every path of the solver runs it: on Python
+floats for one sample (``backend='reference'``), traced once into straight-line kernels
+(``backend='python'``, kernels.py), and on numpy arrays for a batch (batch.py). ``ops`` says
+which: spatial.ScalarOps, spatial.ArrayOps or straight_line.SymOps.
+"""
+from . import closure
+from . import spatial as sp
+from .cog_jacobian import (cog_accelerations, cog_drifts, cog_jacobians, cog_poses,
+                           cog_velocities)
+from .joint_motion import active_velocity_map, closure_drift, combine
+from .kinematics import link_bias_accelerations, link_twists
+from .newton_euler import newton_euler_force, rotated_inertia_times
+
+
+def inverse_dynamics(mechanism, pose, basis, thetadot, thetaddot, ops):
+    """tau_m (eq. 7) at a closed pose (closure.ClosureSolution) with velocity basis V."""
+    s = active_velocity_map(mechanism, basis, ops)                  # qdot = S thetadot
+    cogs = cog_poses(mechanism, pose.frames)                        # (1) g_i
+    jac, _ = cog_jacobians(mechanism, pose.frames, cogs, s)         # (3) G_i
+    velocities = cog_velocities(jac, thetadot)                      # (2) G_i thetadot
+    drifts = cog_drifts(cogs, velocities,                           # (4) Gdot_i thetadot
+                        drift_accelerations(mechanism, pose, s, thetadot))
+    accelerations = cog_accelerations(jac, drifts, thetaddot)       # (4) qddot_i
+    forces = link_forces(mechanism, cogs, velocities, accelerations)  # (5) F_i
+    return active_torques(jac, forces)                              # (6)-(7) sum G_i^T F_i
+
+
+def equation_of_motion(mechanism, pose, basis, thetadot, ops):
+    """H and B of eq. (7): tau = H thetaddot + B. B is eq. (7) with thetaddot = 0; H is
+    sum_i G_i^T M_i G_i."""
+    s = active_velocity_map(mechanism, basis, ops)
+    cogs = cog_poses(mechanism, pose.frames)
+    jac, _ = cog_jacobians(mechanism, pose.frames, cogs, s)
+    velocities = cog_velocities(jac, thetadot)
+    drifts = cog_drifts(cogs, velocities, drift_accelerations(mechanism, pose, s, thetadot))
+    b = active_torques(jac, link_forces(mechanism, cogs, velocities, drifts))
+    return inertia_matrix(mechanism, cogs, jac), b
+
+
+def drift_accelerations(mechanism, pose, s, thetadot):
+    """Spatial acceleration of every link when thetaddot_m = 0: the link-level Gdot thetadot
+    of eq. (4). The joints' own bias (joint twists turning with their inner body) plus the
+    joint accelerations d that keep the loops closed (joint_motion.closure_drift)."""
+    model = mechanism.model
+    qdot = combine(s, thetadot)
+    twists = link_twists(model, pose.frames, qdot)
+    bias = link_bias_accelerations(model, pose.frames, twists, qdot)
+    beta = closure.closure_bias(model, pose.frames, pose.loops, twists, bias, qdot)
+    drift = closure_drift(mechanism, pose, s, beta)
+    drift_twists = link_twists(model, pose.frames, drift)
+    return [sp.twist_add_scaled(b, d, 1.0) for b, d in zip(bias, drift_twists)]
+
+
+def link_forces(mechanism, cogs, velocities, accelerations):
+    """F_i (eq. 5) for every link; None for a massless link (it contributes nothing)."""
+    forces = []
+    for i, ((a, alpha), (_, w)) in enumerate(zip(accelerations, velocities)):
+        mass, inertia = mechanism.link_mass[i], mechanism.link_inertia[i]
+        forces.append(None if massless(mass, inertia) else
+                      newton_euler_force(mass, inertia, cogs[i][1], mechanism.gravity,
+                                         a, w, alpha))
+    return forces
+
+
+def active_torques(jacobians, forces):
+    """tau = sum_i G_i^T F_i (eqs. 6-7); links with force None (massless) contribute nothing."""
+    m = len(jacobians[0]) if jacobians else 0
+    tau = [0.0] * m
+    for cols, force in zip(jacobians, forces):
+        if force is None:
+            continue
+        f, n = force
+        for a, (gv, gw) in enumerate(cols):
+            tau[a] = tau[a] + sp.dot(gv, f) + sp.dot(gw, n)
+    return tau
+
+
+def inertia_matrix(mechanism, cogs, jacobians):
+    """H = sum_i G_i^T M_i G_i (eq. 7), as a list of rows of lanes."""
+    m = len(mechanism.active_joints)
+    h = [[0.0] * m for _ in range(m)]
+    for i, cols in enumerate(jacobians):
+        mass, inertia = mechanism.link_mass[i], mechanism.link_inertia[i]
+        if massless(mass, inertia):
+            continue
+        rot = cogs[i][1]
+        for b, (gv_b, gw_b) in enumerate(cols):
+            f = sp.scale(gv_b, mass)
+            n = rotated_inertia_times(rot, inertia, gw_b)
+            for a in range(b, m):
+                gv_a, gw_a = cols[a]
+                h[a][b] = h[a][b] + sp.dot(gv_a, f) + sp.dot(gw_a, n)
+    for a in range(m):
+        for b in range(a + 1, m):
+            h[a][b] = h[b][a]
+    return h
+
+
+def massless(mass, inertia):
+    return mass == 0.0 and not any(inertia)

@@ -1,0 +1,224 @@
+"""One sample: from the warm start to the closed pose at a setpoint, and the torques there.
+
+The per-sample solve, written once for every backend (kernels.py does the arithmetic):
+
+1. **Continuation** (rules in continuation.py): the primary actuators move from the warm
+   start towards the setpoint in steps short enough to stay on the assembly branch; at
+   control rate the setpoint is one step away and the loop below runs once.
+2. **Each step**: a first-order prediction q + V dz, then Newton's method on the loop
+   equations over the free joints (:meth:`SampleSolver.close`), then the checks: closed,
+   not singular, a Newton correction small enough to be on the same branch.
+3. **Redundant actuation**, at the last step only: Gauss-Newton towards the closed pose
+   nearest the whole setpoint (W^-1 metric), and the check that it is near enough.
+
+A pose that cannot be served raises the error that says why (``.reason``: closure,
+singular, inconsistent, unreachable); the warm start is the caller's and is never changed
+here.
+"""
+import math
+
+from .continuation import (MAX_STEPS, MIN_STEP, actuator_ratio, correction_bounds,
+                           correction_ok, fits_one_step, intermediate_goal, joint_step_limits,
+                           prediction, revolute_active, step_ratio, wrapped_state)
+from .errors import ClosureError, SingularConfigurationError
+from .joint_motion import projected_pose
+
+#: Newton iterations of one continuation step (from a first-order prediction within the
+#: step limits Newton converges in a few; more means the step is too long: it is halved)
+NEWTON_ITERATIONS = 12
+
+#: largest Newton increment (rad or m) applied at once; longer ones are scaled down
+NEWTON_MAX_INCREMENT = 0.5
+
+#: Gauss-Newton iterations of the redundant projection, and the increment that ends it
+PROJECTION_ITERATIONS = 6
+PROJECTION_TOLERANCE = 1e-14
+
+
+class SampleSolver:
+    """The per-sample solve of one mechanism with one set of kernels.
+
+    A state is (q, V): every joint coordinate and the velocity basis there (a list over
+    joints of rows over the primary actuators), as solve() returns it.
+    """
+
+    def __init__(self, mechanism, kernels, continuation_step):
+        m = self.mechanism = mechanism
+        self.kernels = kernels
+        self.limits = joint_step_limits(m, continuation_step)
+        self.bounds = correction_bounds(self.limits)
+        self.wrapping = revolute_active(m)
+        self.free = m.free_joints
+        self.tolerance = m.closure_tolerance
+        self.redundant = m.is_redundant
+        self.zeros = [0.0] * len(m.active_joints)
+        # the velocity basis rows of the primary actuators are constant unit rows
+        self.unit_rows = [(j, [1.0 if i == k else 0.0 for i in range(m.dof)])
+                          for k, j in enumerate(m.primary_joints)]
+
+    def solve(self, state, target, qd=None, qdd=None, sample=None):
+        """(PoseRecord at ``target``, new state) by continuation from ``state``."""
+        m, limits = self.mechanism, self.limits
+        qd = self.zeros if qd is None else qd
+        qdd = self.zeros if qdd is None else qdd
+        start = state
+        state = wrapped_state(m, self.wrapping, state, target)
+        ahead, moved = prediction(m, state, target)
+        one_step = fits_one_step(m, limits, state, target, moved)
+        if not one_step and actuator_ratio(m, limits, state, target) > MAX_STEPS:
+            raise unreachable(m, start, target, sample,
+                              f'it is more than {MAX_STEPS} continuation steps away')
+        cap = 1.0     # the largest step, in step limits (halved when a step fails)
+        for _ in range(MAX_STEPS):
+            predicted = ahead
+            if cap >= 1.0 and one_step:         # at control rate: the only step
+                size, goal, final = 1.0, target, True
+            else:
+                ratio = step_ratio(m, limits, state, target, moved)
+                if ratio <= cap * (1.0 + 1e-9):      # (not a sliver of a step left over)
+                    size, goal, final = ratio, target, True
+                else:
+                    size, goal, final = cap, intermediate_goal(m, state, target, cap / ratio), False
+                    predicted, _ = prediction(m, state, goal)
+            try:
+                record, new_state, closed = self.step(predicted, goal, final, qd, qdd, sample)
+            except ClosureError as exc:
+                if final:
+                    raise
+                if exc.reason != 'closure' or cap < MIN_STEP:
+                    raise unreachable(m, start, target, sample,
+                                      f'the loops stop closing on the way, at {_fmt(goal)}') from None
+                cap = size / 2.0      # Newton failed on the way: try a shorter step
+                continue
+            except SingularConfigurationError as exc:
+                if final:
+                    raise
+                raise unreachable(m, start, target, sample,
+                                  f'the way there passes a singular pose at {_fmt(goal)} '
+                                  f'(condition number {exc.condition_number:.3g})') from None
+            if not correction_ok(closed, predicted, self.bounds):
+                if size / 2.0 < MIN_STEP:
+                    raise unreachable(m, start, target, sample,
+                                      'the assembly branch cannot be followed there (Newton '
+                                      'corrections stay large even in short steps: a branch '
+                                      'point or dead centre)')
+                cap = size / 2.0      # Newton moved far from the prediction: maybe another branch
+                continue
+            if final:
+                return record, new_state
+            state, cap = new_state, min(1.0, cap * 2.0)
+            ahead, moved = prediction(m, state, target)
+            one_step = fits_one_step(m, limits, state, target, moved)
+        raise unreachable(m, start, target, sample, f'not reached in {MAX_STEPS} continuation steps')
+
+    def step(self, predicted, goal, final, qd, qdd, sample):
+        """One continuation step: close the loops from ``predicted``, check, and on the final
+        step of a redundant mechanism project onto ``goal``. Returns (PoseRecord, new state,
+        the pose Newton closed before any projection)."""
+        m = self.mechanism
+        q, record, iterations, ok = self.close(predicted, goal, qd, qdd)
+        if not ok:
+            raise not_closed(m, record, self.tolerance, iterations, sample)
+        closed = q
+        if final and self.redundant:
+            q, record = self.project(q, record, goal, qd, qdd, sample)
+        if not record.condition <= m.max_condition_number:
+            raise singular(m, record.condition, sample)
+        return record, (q, self.basis(record)), closed
+
+    def close(self, q, goal, qd, qdd, likely_closed=False):
+        """Newton's method on the loop equations from ``q``, moving the free joints.
+
+        Returns (q, PoseRecord at q, iterations, closed); when not closed the record is
+        where Newton stopped. The cheap closure kernel is used only where the pose is
+        probably not closed (a prediction); after an increment, or when ``likely_closed``,
+        the whole record is evaluated at once."""
+        kernels, tol, free = self.kernels, self.tolerance, self.free
+        whole = likely_closed
+        record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
+        for iteration in range(NEWTON_ITERATIONS + 1):
+            residual = record.residual
+            if (max(map(abs, residual)) if residual else 0.0) < tol and \
+                    (not record.cosines or min(record.cosines) > 0.0):
+                if not whole:
+                    record = kernels.dynamics(q, goal, qd, qdd)
+                return q, record, iteration, True
+            if iteration == NEWTON_ITERATIONS:
+                break
+            increment = record.increment
+            size = max(map(abs, increment))
+            if not size < math.inf or size < 1e-15 * (1.0 + max([abs(q[j]) for j in free])):
+                break                               # NaN or infinite, or stagnated
+            factor = min(1.0, NEWTON_MAX_INCREMENT / size)
+            q = list(q)
+            for k, j in enumerate(free):
+                q[j] = q[j] - increment[k] * factor
+            record = kernels.dynamics(q, goal, qd, qdd)
+            whole = True
+        if not whole:
+            record = kernels.dynamics(q, goal, qd, qdd)
+        return q, record, iteration, False
+
+    def project(self, q, record, target, qd, qdd, sample):
+        """Redundant actuation: Gauss-Newton over closed poses towards ``target``; the
+        setpoint must then be within mechanism.setpoint_tolerance of the pose."""
+        m = self.mechanism
+        for _ in range(PROJECTION_ITERATIONS):
+            dz = record.projection
+            if max(map(abs, dz)) < PROJECTION_TOLERANCE:
+                break
+            q, record, iterations, ok = self.close(
+                projected_pose(m, q, self.basis(record), dz), target, qd, qdd,
+                likely_closed=True)
+            if not ok:
+                raise not_closed(m, record, self.tolerance, iterations, sample)
+        mismatch = max(abs(q[j] - t) for j, t in zip(m.active_index, target))
+        if mismatch > m.setpoint_tolerance:
+            raise ClosureError(
+                f'{_where(sample)}the redundant setpoint disagrees with the loop closure by '
+                f'{mismatch:.6g} (rad or m), more than mechanism.setpoint_tolerance '
+                f'{m.setpoint_tolerance:.6g}', mismatch, sample, reason='inconsistent')
+        return q, record
+
+    def basis(self, record):
+        """The velocity basis V (list over joints) from a record's rows of the free joints."""
+        rows = [None] * len(self.mechanism.joints)
+        for j, row in self.unit_rows:
+            rows[j] = row
+        for j, row in zip(self.free, record.basis):
+            rows[j] = row
+        return rows
+
+
+def _where(sample):
+    return '' if sample is None else f'sample {sample}: '
+
+
+def _fmt(values):
+    return '[' + ', '.join(f'{v:.6g}' for v in values) + ']'
+
+
+def not_closed(mechanism, record, tolerance, iterations, sample):
+    residual = max(map(abs, record.residual))
+    return ClosureError(
+        f'{_where(sample)}the loops cannot be closed at this setpoint: closure residual '
+        f'{residual:.3g} (tolerance {tolerance:.3g}) after {iterations} Newton iterations',
+        residual, sample)
+
+
+def singular(mechanism, condition, sample):
+    return SingularConfigurationError(
+        f'{_where(sample)}singular configuration: closure Jacobian condition number '
+        f'{condition:.3g} exceeds mechanism.max_condition_number '
+        f'{mechanism.max_condition_number:.3g}', condition, sample)
+
+
+def unreachable(mechanism, start, target, sample, why):
+    """ClosureError(reason='unreachable') for a setpoint continuation cannot get to."""
+    q = start[0]
+    last = [q[j] for j in mechanism.active_index]
+    return ClosureError(
+        f'{_where(sample)}cannot reach the setpoint {_fmt(target)} from the last pose '
+        f'{_fmt(last)} of {mechanism.active_joints}: {why}. Send setpoints closer together '
+        f'(the solver follows the assembly branch in short steps)', math.inf, sample,
+        reason='unreachable')
