@@ -13,12 +13,12 @@ successful run and a complete output.
 """
 import argparse
 import os
+from pathlib import Path
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 

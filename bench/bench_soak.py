@@ -140,8 +140,8 @@ class Sampler(threading.Thread):
 def trajectory_helper(args):
     """Publish one long trajectory at monotonic time ``--at`` and wait for its answer; print
     one JSON line with the times (monotonic, comparable across processes)."""
-    import rclpy
     from builtin_interfaces.msg import Duration
+    import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -206,8 +206,8 @@ class Driver:
     """Streams setpoints into one or more nodes and records every answer."""
 
     def __init__(self, namespaces, joints, home, rate, duration):
-        import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
+        import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import JointState
@@ -229,9 +229,9 @@ class Driver:
         self.sent_count = 0
         self.start_ns = 0
         self.commands = {ns: [] for ns in namespaces}     # arrival times
-        self.command_bad = {ns: 0 for ns in namespaces}   # commands with NaN/Inf
+        self.command_bad = dict.fromkeys(namespaces, 0)   # commands with NaN/Inf
         self.efforts = {ns: [] for ns in namespaces}      # (arrival, stamp index)
-        self.effort_bad = {ns: 0 for ns in namespaces}
+        self.effort_bad = dict.fromkeys(namespaces, 0)
         self.diagnostics = {ns: {} for ns in namespaces}
         self.loops = []
         for ns in namespaces:

@@ -54,9 +54,9 @@ def main(argv=None):
 
     os.environ.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 70))
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    import rclpy
     from builtin_interfaces.msg import Duration
     from diagnostic_msgs.msg import DiagnosticArray
+    import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.serialization import serialize_message
@@ -179,9 +179,9 @@ def main(argv=None):
           f'{1e3 * max(during, default=float("nan")):.1f} ms; whole run: '
           f'{1e3 * gaps.max():.1f} ms (p99.9 {1e3 * np.percentile(gaps, 99.9):.2f} ms)')
     worst = int(np.argmax(gaps))
-    print(f'  the worst gap ended {arr[worst + 1] - t0:+.3f} s from the trajectory\'s '
+    print(f"  the worst gap ended {arr[worst + 1] - t0:+.3f} s from the trajectory's "
           f'publication ({arr[worst + 1] - t1:+.3f} s from its answer)')
-    print(f'  worst gap between this process\'s own publications: {1e3 * send_gaps.max():.1f} ms')
+    print(f"  worst gap between this process's own publications: {1e3 * send_gaps.max():.1f} ms")
     print(f"  node diagnostics: setpoints_lost {kv.get('setpoints_lost', 'n/a')}, "
           f"trajectories_accepted {kv.get('trajectories_accepted', 'n/a')}, "
           f"trajectories_rejected {kv.get('trajectories_rejected', 'n/a')}")

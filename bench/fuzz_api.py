@@ -30,9 +30,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 for _folder in ('test', os.path.join('test', 'core')):   # test_fuzz and its helpers
     sys.path.insert(0, os.path.join(os.path.dirname(HERE), _folder))
 
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import seed as hseed  # noqa: E402
 import numpy as np  # noqa: E402
-from hypothesis import given, seed as hseed, settings  # noqa: E402
-
 import test_fuzz as fz  # noqa: E402
 
 

@@ -33,10 +33,10 @@ REPO = os.path.dirname(HERE)
 for _folder in ('test', os.path.join('test', 'core')):   # test_fuzz and its helpers
     sys.path.insert(0, os.path.join(REPO, _folder))
 
-import numpy as np  # noqa: E402
-from hypothesis import given, seed as hseed, settings  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import seed as hseed  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
-
+import numpy as np  # noqa: E402
 import test_fuzz as fz  # noqa: E402
 
 import cog_id_ros  # noqa: E402

@@ -4,9 +4,18 @@
     solver = cog_id_ros.InverseDynamics(mech)
     tau = solver.torques(q, qd, qdd)
 """
-from .core import (REASONS, AssemblyWarning, ClosureError, CogIdError, Evaluation,
-                   InverseDynamics, Mechanism, MechanismConfigError, SetpointError,
-                   SingularConfigurationError)
+from .core import (
+    REASONS,
+    AssemblyWarning,
+    ClosureError,
+    CogIdError,
+    Evaluation,
+    InverseDynamics,
+    Mechanism,
+    MechanismConfigError,
+    SetpointError,
+    SingularConfigurationError,
+)
 
 __version__ = '0.1.0'
 __all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',

@@ -29,8 +29,8 @@ active vectors in the order of ``mechanism.active_joints``.
 """
 from __future__ import annotations
 
-import math
 from collections import deque
+import math
 
 import numpy as np
 import pytest

@@ -164,7 +164,7 @@ def plot(path, t, results, rate):
         ax.text(0.98, 0.03, f'{int(found.sum())}/{found.size} setpoints at {rate:g} Hz\n'
                 f'max |error| after warm-up: {worst:.2e} N m',
                 transform=ax.transAxes, ha='right', va='bottom', fontsize=8.5,
-                bbox=dict(boxstyle='round', fc='white', ec='0.8'))
+                bbox={'boxstyle': 'round', 'fc': 'white', 'ec': '0.8'})
     axes[0].set_ylabel('actuator torque [N m]')
     fig.suptitle('Paper four-bar, target motion \u03b8(t) = \u03c0/2 + 0.5 sin(\u03c0t): '
                  'torques published by cog_id_node (Fig. 4)', fontsize=12)

@@ -84,7 +84,7 @@ def write_csv(path, t, joints=JOINTS, fields=('position', 'velocity', 'accelerat
 def main(argv=None):
     parser = argparse.ArgumentParser(
         prog='python -m cog_id_ros.demos.paper_four_bar',
-        description='Write the paper\'s target motion as a trajectory CSV (default: '
+        description="Write the paper's target motion as a trajectory CSV (default: "
                     'config/paper_four_bar_target.csv).')
     parser.add_argument('--rate', type=float, default=1000.0, help='samples per second')
     parser.add_argument('--duration', type=float, default=DURATION, help='seconds')

@@ -20,9 +20,11 @@ def paper_torques(t):
     th, thd, thdd = target_motion(t)
     out = []
     for variant in ('a', 'b'):
-        mech = Mechanism.from_params_file(os.path.join(config_dir(), f'paper_four_bar_{variant}.yaml'))
+        path = os.path.join(config_dir(), f'paper_four_bar_{variant}.yaml')
+        mech = Mechanism.from_params_file(path)
         m = len(mech.active_joints)
-        out.append(InverseDynamics(mech).torques(*(np.tile(x[:, None], (1, m)) for x in (th, thd, thdd))))
+        columns = (np.tile(x[:, None], (1, m)) for x in (th, thd, thdd))
+        out.append(InverseDynamics(mech).torques(*columns))
     return out[0][:, 0], out[1]
 
 

@@ -1,6 +1,7 @@
 """cog_id_torques: actuator torques of a closed-link mechanism along a CSV trajectory.
 
-    cog_id_torques --params-file config/X.yaml --input traj.csv --output torques.csv [--plot torques.png]
+    cog_id_torques --params-file config/X.yaml --input traj.csv --output torques.csv \
+        [--plot torques.png]
 
 Reads the trajectory (:mod:`cog_id_ros.trajectory_io`), estimates absent velocities and
 accelerations (:mod:`cog_id_ros.derivatives`), solves the samples in chunks on the core's
@@ -111,7 +112,7 @@ exit status:
      files removed, no output written; {EXIT_BROKEN_PIPE} stdout closed before the summary
   On any error, one line on stderr names the row and column, and no output file is
   written (outputs are written to temporary files and renamed when complete).
-"""
+"""  # noqa: E501 (help text as printed)
 
 
 class ToolError(Exception):
@@ -264,7 +265,7 @@ def _positive_float(text):
     return value
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit status. Never prints a traceback."""
     args = build_parser().parse_args(argv)
     signals = StopSignals().install()
@@ -368,7 +369,9 @@ def _check_paths(args):
     if not os.path.isfile(args.params_file):
         what = 'no such file' if not os.path.exists(args.params_file) else 'not a regular file'
         raise ToolError(f'--params-file {args.params_file}: {what}', EXIT_PARAMS)
-    outputs = [('--output', args.output)] + ([('--plot', args.plot)] if args.plot is not None else [])
+    outputs = [('--output', args.output)]
+    if args.plot is not None:
+        outputs.append(('--plot', args.plot))
     targets = {}
     for option, path in outputs:
         if not path:
@@ -525,7 +528,8 @@ def solve(solver, q, qd, qdd, chunk, skip_invalid, progress, path, rows=None):
             sample = getattr(exc, 'sample', None)
             if sample is None and idx.size == 1:
                 sample = 0
-            if skip_invalid and sample is not None and _row_level(exc) and 0 <= int(sample) < idx.size:
+            if skip_invalid and sample is not None and _row_level(exc) \
+                    and 0 <= int(sample) < idx.size:
                 skip_at, skip_error = pos + int(sample), exc
                 continue
             progress.close()
@@ -708,7 +712,8 @@ def format_summary(summary):
         lines.append('  '.join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
     written = [s['output']] + ([s['plot']] if s['plot'] else [])
     lines.append('wrote ' + ', '.join(written)
-                 + f"  ({s['elapsed_seconds']:.2f} s, {s['samples_per_second'] or 0:,.0f} samples/s)")
+                 + f"  ({s['elapsed_seconds']:.2f} s, "
+                 + f"{s['samples_per_second'] or 0:,.0f} samples/s)")
     return '\n'.join(lines)
 
 
@@ -883,7 +888,8 @@ def run(args, stdout, stderr, signals=None):
               + ' by finite differences (see --help)', file=stderr)
     n = len(traj)
     to_solve = int(np.count_nonzero(keep))
-    progress = ProgressBar(to_solve, stderr, ProgressBar.wanted(to_solve, stderr, args.no_progress))
+    wanted = ProgressBar.wanted(to_solve, stderr, args.no_progress)
+    progress = ProgressBar(to_solve, stderr, wanted)
     progress.update(0)
     try:
         efforts, valid, skipped = solve(solver, q, qd, qdd, args.chunk_size, args.skip_invalid,

@@ -35,10 +35,13 @@ import re
 import signal
 import stat
 import tempfile
+from typing import Iterator, Sequence, Union
 
 import numpy as np
 
 from . import derivatives
+
+PathLike = Union[str, os.PathLike]
 
 TIME = 'time'
 FIELDS = ('position', 'velocity', 'acceleration')
@@ -102,7 +105,7 @@ class Trajectory:
         return self.time.size
 
 
-def joint_column(joint, field):
+def joint_column(joint: str, field: str) -> str:
     return f'{joint}.{field}'
 
 
@@ -281,7 +284,8 @@ def _locate_bad_cell(path, lines, n_columns, order, numpy_message):
     raise TrajectoryError(path, f'cannot parse: {numpy_message}', row=row)
 
 
-def read_trajectory(path, joints, active_joints):
+def read_trajectory(path: PathLike, joints: Sequence[str],
+                    active_joints: Sequence[str]) -> 'Trajectory':
     """Read and validate a trajectory CSV for a mechanism (``joints``, ``active_joints``).
 
     Raises :class:`TrajectoryError` naming the row and column of the first problem:
@@ -327,7 +331,7 @@ def read_trajectory(path, joints, active_joints):
     return Trajectory(path, time, columns, notes, names)
 
 
-def unwrap_positions(traj, joints):
+def unwrap_positions(traj: 'Trajectory', joints: Sequence[str]) -> dict[str, tuple[int, int]]:
     """Unwrap the position columns of ``joints`` (revolute ones) in place.
 
     Each position is replaced by its 2 pi equivalent nearest the previous row's (already
@@ -354,7 +358,8 @@ def unwrap_positions(traj, joints):
     return result
 
 
-def find_jumps(q, limits, block=4096):
+def find_jumps(q: np.ndarray, limits: np.ndarray,
+               block: int = 4096) -> list[tuple[int, int, float, int]]:
     """Rows whose position jumps from the last accepted row by more than ``limits``.
 
     ``q`` (N, M) positions, ``limits`` (M,) the largest step per row of each column.
@@ -396,7 +401,7 @@ def find_jumps(q, limits, block=4096):
     return jumps
 
 
-def kept_pieces(keep, max_gap=1):
+def kept_pieces(keep: np.ndarray, max_gap: int = 1) -> list[np.ndarray]:
     """Split the kept rows (0-based indices of ``keep``) where two or more rows in a row
     were dropped: derivatives are estimated across a single dropped row (a glitch; the
     motion around it is smooth) but never across a longer gap, which may hide any motion."""
@@ -406,7 +411,8 @@ def kept_pieces(keep, max_gap=1):
     return np.split(rows, np.flatnonzero(np.diff(rows) > max_gap + 1) + 1)
 
 
-def setpoints(traj, active_joints, keep=None):
+def setpoints(traj: 'Trajectory', active_joints: Sequence[str], keep: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Positions, velocities and accelerations (N, M) of the active joints.
 
     Absent velocity and acceleration columns are estimated by the package's one rule,
@@ -510,7 +516,7 @@ _SPECIAL = ((stat.S_ISFIFO, 'a FIFO (named pipe)'), (stat.S_ISCHR, 'a character 
             (stat.S_ISBLK, 'a block device'), (stat.S_ISSOCK, 'a socket'))
 
 
-def output_target(path):
+def output_target(path: PathLike) -> str:
     """The file that writing ``path`` really replaces: ``path``, or the end of its symlinks.
 
     A symbolic link is written through: the file it points to is replaced (atomically)
@@ -574,7 +580,7 @@ def _stop_signals_blocked():
 
 
 @contextlib.contextmanager
-def atomic_output(path):
+def atomic_output(path: PathLike) -> Iterator[str]:
     """Yield a temporary path next to ``path``'s target; rename it there on success only.
 
     The target is :func:`output_target` (``path``, or the file its symlinks lead to;
@@ -603,7 +609,8 @@ def atomic_output(path):
         raise
 
 
-def format_efforts(time, efforts, valid, active_joints, block=100_000):
+def format_efforts(time: np.ndarray, efforts: np.ndarray, valid: np.ndarray,
+                   active_joints: Sequence[str], block: int = 100_000) -> Iterator[str]:
     """Yield the output CSV text in blocks (header first)."""
     time = np.asarray(time, dtype=float)
     efforts = np.asarray(efforts, dtype=float).reshape(time.size, -1)
@@ -622,7 +629,8 @@ def format_efforts(time, efforts, valid, active_joints, block=100_000):
         yield '\n'.join(map(','.join, zip(*cols))) + '\n'
 
 
-def write_efforts(path, time, efforts, valid, active_joints):
+def write_efforts(path: PathLike, time: np.ndarray, efforts: np.ndarray, valid: np.ndarray,
+                  active_joints: Sequence[str]) -> None:
     """Write the output CSV atomically (see the module docstring for the format)."""
     with atomic_output(path) as tmp:
         with open(tmp, 'w', encoding='utf-8', newline='') as f:
@@ -630,7 +638,7 @@ def write_efforts(path, time, efforts, valid, active_joints):
                 f.write(chunk)
 
 
-def read_efforts(path):
+def read_efforts(path: PathLike) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Read an output CSV back: ``(header, time, efforts)`` with NaN for empty cells."""
     with open(path, encoding='utf-8', newline='') as f:
         rows = list(csv.reader(f))

@@ -28,7 +28,8 @@ rclpy's QoS override parameters, e.g.
 
 Parameters: the mechanism (``mechanism.*``, ``links.*``, ``joints.*``; see the README's
 mechanism parameter file section) and the node's own, written once with their types,
-defaults, bounds and meaning in :mod:`cog_id_ros.ros.parameters` (``NODE_PARAMETERS``). All are read once at start-up and are read-only afterwards,
+defaults, bounds and meaning in :mod:`cog_id_ros.ros.parameters` (``NODE_PARAMETERS``).
+All are read once at start-up and are read-only afterwards,
 ``use_sim_time`` included. A parameter that cannot be honoured (or a params file rcl cannot
 parse) ends the process with exit status 2 and one line naming the parameter.
 ``cog_id_node --help`` prints the usage. Diagnostics keys: ``DIAGNOSTIC_KEYS``.
@@ -54,13 +55,12 @@ import tempfile
 import threading
 import time
 
-import numpy as np
-import rclpy
-import rclpy.exceptions
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+import rclpy
 from rclpy.event_handler import PublisherEventCallbacks
+import rclpy.exceptions
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -68,17 +68,28 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
+import yaml
 
-from . import stop_signals
 from ..core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
-from .parameters import (MAX_QOS_DEPTH, MECHANISM_PREFIXES, NODE_PARAMETERS,
-                         QOS_OVERRIDE_VALUES)
-from .topics import DIAGNOSTICS_QOS_DEPTH, TOPICS, control_qos
-from .conversions import (NANOSECONDS, REASONS, TRAJECTORY_REASONS, EffortMessages,
-                          JointSelector, Rejected, nearest_turn, rejection, setpoint_arrays,
-                          stamp_to_ns, trajectory_point_count, trajectory_process)
+from . import stop_signals
+from .conversions import (
+    NANOSECONDS,
+    REASONS,
+    TRAJECTORY_REASONS,
+    EffortMessages,
+    JointSelector,
+    Rejected,
+    nearest_turn,
+    rejection,
+    setpoint_arrays,
+    stamp_to_ns,
+    trajectory_point_count,
+    trajectory_process,
+)
+from .parameters import MAX_QOS_DEPTH, MECHANISM_PREFIXES, NODE_PARAMETERS, QOS_OVERRIDE_VALUES
 from .setpoint_filter import SetpointFilter, StampError
 from .setpoint_loop import SetpointLoop
+from .topics import DIAGNOSTICS_QOS_DEPTH, TOPICS, control_qos
 
 NODE_NAME = 'cog_id_node'
 
@@ -100,7 +111,7 @@ it. Ctrl-C or SIGTERM stop it (exit status 0).
 
 Documentation: docs/node.md (topics, parameters, diagnostics) and README.md (the
 mechanism parameter file) of the cog_id_ros package.
-"""
+"""  # noqa: E501 (the usage line as printed)
 
 #: keys of /diagnostics besides rejected.<reason> and trajectories_rejected.<reason>
 DIAGNOSTIC_KEYS = {
@@ -118,7 +129,7 @@ DIAGNOSTIC_KEYS = {
     'effort_clipped': 'setpoints, trajectories and hold commands that were clipped',
     'timeouts': 'times the stream stopped',
     'internal_errors': 'exceptions the node caught in its own callbacks (a bug: please report)',
-    'nodes_with_this_name': 'nodes in the ROS graph with this node\'s name and namespace '
+    'nodes_with_this_name': "nodes in the ROS graph with this node's name and namespace "
                             '(more than 1: every setpoint gets several commands)',
     'last_closure_residual': 'max closure equation residual at the last served pose, m or rad',
     'closure_condition_number': 'condition number of the closure Jacobian there',
@@ -186,9 +197,9 @@ class CogIdNode(Node):
                                            'trajectories_rejected': 0, 'effort_clipped': 0,
                                            'timeouts': 0, 'internal_errors': 0,
                                            'setpoints_lost': 0, 'stamp_restarts': 0})
-        self.rejected = collections.Counter({reason: 0 for reason in REASONS})
+        self.rejected = collections.Counter(dict.fromkeys(REASONS, 0))
         self.trajectory_rejected = collections.Counter(
-            {reason: 0 for reason in (*REASONS, *TRAJECTORY_REASONS)})
+            dict.fromkeys((*REASONS, *TRAJECTORY_REASONS), 0))
         self.compute_times = collections.deque(maxlen=COMPUTE_TIME_WINDOW)
         self.last_rejection = ''
         self.last_was_rejected = False
@@ -228,8 +239,8 @@ class CogIdNode(Node):
             # The control-rate input: its own thread and wait set, outside the executor (see
             # setpoint_loop.py). start() once the node is built; stop() before destroying it.
             self.setpoint_loop = SetpointLoop(
-                self, JointState, TOPICS['joint_setpoint'].name, self.serve_setpoint, control_qos(),
-                lock=self.lock, on_error=self._serve_failed, with_info=True,
+                self, JointState, TOPICS['joint_setpoint'].name, self.serve_setpoint,
+                control_qos(), lock=self.lock, on_error=self._serve_failed, with_info=True,
                 qos_overriding_options=qos_options())
             # taken serialized: the executor never deserialises a long trajectory (a C call
             # that holds the GIL for seconds); the trajectory process does
@@ -255,7 +266,8 @@ class CogIdNode(Node):
         if self.setpoint_timeout > 0.0:
             self.create_timer(min(self.setpoint_timeout / 4.0, 0.25), self.check_timeout)
 
-        limits = ', '.join(f'{j} {lim:g}' for j, lim in zip(self.active_joints, self.effort_limits))
+        limits = ', '.join(f'{j} {lim:g}'
+                           for j, lim in zip(self.active_joints, self.effort_limits))
         self.get_logger().info(
             f"mechanism '{mech.name}': {len(mech.links)} links, {len(mech.joints)} joints, "
             f"{mech.dof} DOF, active joints {', '.join(self.active_joints)}"
@@ -384,11 +396,11 @@ class CogIdNode(Node):
             stamp = stamp_to_ns(msg.header.stamp)
             if not stamp:
                 stamp = self.get_clock().now().nanoseconds
-            elif self.max_stamp_lead_ns != math.inf and \
-                    0 < (now := self.get_clock().now().nanoseconds) < stamp - self.max_stamp_lead_ns:
+            elif self.max_stamp_lead_ns != math.inf and 0 < (
+                    now := self.get_clock().now().nanoseconds) < stamp - self.max_stamp_lead_ns:
                 # (a clock at 0 has not started: use_sim_time before the first /clock)
                 raise Rejected('stamp', f'stamp {stamp / NANOSECONDS:.9f} is '
-                               f'{(stamp - now) / NANOSECONDS:.6g} s ahead of the node\'s clock '
+                               f"{(stamp - now) / NANOSECONDS:.6g} s ahead of the node's clock "
                                f'(max_stamp_lead {self.max_stamp_lead_ns / NANOSECONDS:g} s): '
                                'check the clock of the setpoint source')
             try:
@@ -415,7 +427,8 @@ class CogIdNode(Node):
             tau = np.array(efforts)
             if self.clip(tau):
                 efforts = tau.tolist()
-        self.command_pub.publish(self.outputs.command_for(efforts))   # first: what control waits for
+        # first the command: what control waits for
+        self.command_pub.publish(self.outputs.command_for(efforts))
         self.effort_pub.publish(self.outputs.state_for(msg.header, received, v_used, efforts))
         self.filter.accept(stamp, q, v)
         self._stamp_rejections = 0
@@ -444,9 +457,9 @@ class CogIdNode(Node):
             for joint, x, ref, limit in zip(self.active_joints, q, previous, self.max_step):
                 if abs(x - ref) > limit:
                     self.filter.reset()
-                    raise Rejected('jump', f'{joint} moves by {abs(x - ref):.6g} from the previous '
-                                   f'setpoint (max_setpoint_step {limit:g}); the estimator '
-                                   'restarts: the next setpoint starts a new stream')
+                    raise Rejected('jump', f'{joint} moves by {abs(x - ref):.6g} from the '
+                                   f'previous setpoint (max_setpoint_step {limit:g}); the '
+                                   'estimator restarts: the next setpoint starts a new stream')
         return q
 
     def _restart_after_stamps(self, exc):
@@ -823,7 +836,7 @@ class TrajectoryWorker:
                                 f'{code}); a new one is started for the next trajectory')
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     """Start the node and spin until Ctrl-C or SIGTERM (exit status 0).
 
     ``-h``/``--help`` (before ``--ros-args``): the usage, exit status 0. A parameter that
@@ -906,7 +919,7 @@ def _spin(executor, node):
             time.sleep(0.01)   # an error that repeats must not turn into a busy loop
 
 
-def params_file_problem(argv):
+def params_file_problem(argv: list[str]) -> str | None:
     """A sentence naming the first parameter of a ``--params-file`` rcl would refuse, or None.
 
     rcl's own message names a line of the file, not the parameter, and comes with a

@@ -227,15 +227,15 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
     NodeParameter(
         'max_stamp_lead', 'double', 1.0, 'number', unit='s', low=0.0, high=math.inf,
         special=(math.inf, 'no check'),
-        description='s: a setpoint stamped farther than this ahead of the node\'s clock is '
+        description="s: a setpoint stamped farther than this ahead of the node's clock is "
                     'rejected (`stamp`): one far-future stamp (a source whose clock is wrong) '
                     'would otherwise be served and make every later setpoint come "before" '
-                    'it; `.inf`: no check (nor while the node\'s clock reads 0: '
+                    "it; `.inf`: no check (nor while the node's clock reads 0: "
                     '`use_sim_time` before the first `/clock`)'),
     NodeParameter(
         'max_stamp_rejections', 'int', 5, 'integer', low=0, high=1000,
         description='when this many setpoints in a row are rejected because their stamp does '
-                    'not come after the previous accepted one (the source\'s clock went back, '
+                    "not come after the previous accepted one (the source's clock went back, "
                     'or restarted), the estimator restarts and that setpoint starts a new '
                     'stream (counted in `stamp_restarts`; 4 setpoints lost with the default); '
                     '0: never (the stream then waits for `setpoint_timeout`)'),
@@ -259,13 +259,13 @@ OTHER_PARAMETERS = (
     ('`mechanism.*`, `links.*`, `joints.*`', '', '', '',
      'the mechanism (README, "Mechanism parameter file")'),
     ('`use_sim_time`', 'bool', '`false`', 'true, false',
-     'rclpy\'s: the node\'s clock from `/clock` (stamps of zero, `max_stamp_lead`, the stamp '
+     "rclpy's: the node's clock from `/clock` (stamps of zero, `max_stamp_lead`, the stamp "
      'of `/diagnostics`); read-only like the rest'),
     ('`qos_overrides./<topic>.<publisher|subscription>.<history|depth|reliability>`', '', '',
      f"history {', '.join(f'`{v}`' for v in QOS_OVERRIDE_VALUES['history'])}; reliability "
      f"{', '.join(f'`{v}`' for v in QOS_OVERRIDE_VALUES['reliability'])}; depth 1 to "
      f'{MAX_QOS_DEPTH}',
-     'rclpy\'s QoS overrides (see QoS below); anything else: exit status 2, one line'),
+     "rclpy's QoS overrides (see QoS below); anything else: exit status 2, one line"),
 )
 
 

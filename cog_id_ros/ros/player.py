@@ -1,6 +1,7 @@
-"""cog_id_player: play a CSV trajectory into ``joint_setpoint``; optionally record ``joint_effort``.
+"""cog_id_player: play a CSV trajectory into ``joint_setpoint``, record ``joint_effort``.
 
-    cog_id_player --input motion.csv [--rate 1000] [--output efforts.csv] [--ros-args -r __ns:=/arm]
+    cog_id_player --input motion.csv [--rate 1000] [--output efforts.csv] \
+        [--ros-args -r __ns:=/arm]
 
 The CSV is the one of the offline tool ``cog_id_torques``: a ``time`` column (seconds,
 strictly increasing) and ``<joint>.position`` per joint, optionally ``<joint>.velocity``
@@ -28,10 +29,10 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from . import stop_signals
 from ..offline import trajectory_io
-from .topics import control_qos
+from . import stop_signals
 from .conversions import NANOSECONDS, stamp_to_ns
+from .topics import control_qos
 
 #: the recorder must not drop what the node sends while the player is busy publishing
 RECORDER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
@@ -165,10 +166,12 @@ def build_parser():
         prog='cog_id_player',
         description='Play a CSV trajectory into joint_setpoint (sensor_msgs/JointState) and '
                     'optionally record joint_effort. ROS arguments go after --ros-args.')
-    p.add_argument('--input', required=True, help='CSV: time, <joint>.position[, <joint>.velocity]')
+    p.add_argument('--input', required=True,
+                   help='CSV: time, <joint>.position[, <joint>.velocity]')
     p.add_argument('--rate', type=float, help='resample to this many setpoints per second '
                    '(default: the rows as they are)')
-    p.add_argument('--topic', default='joint_setpoint', help='setpoint topic (default %(default)s)')
+    p.add_argument('--topic', default='joint_setpoint',
+                   help='setpoint topic (default %(default)s)')
     p.add_argument('--no-velocity', action='store_true', help='do not send the velocity columns')
     p.add_argument('--output', help='record joint_effort to this CSV (time, <joint>.effort)')
     p.add_argument('--effort-topic', default='joint_effort', help='default %(default)s')
@@ -177,7 +180,7 @@ def build_parser():
     return p
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     argv = sys.argv if argv is None else argv
     cli_args = rclpy.utilities.remove_ros_args(argv)[1:]
     args = build_parser().parse_args(cli_args)

@@ -59,13 +59,13 @@ TOPICS: dict[str, Topic] = {t.name: t for t in (
     Topic('effort_command', 'std_msgs/Float64MultiArray', 'out', _CONTROL,
           'one per accepted setpoint: efforts in `mechanism.active_joints` order'),
     Topic('joint_effort', 'sensor_msgs/JointState', 'out', _CONTROL,
-          'one per accepted setpoint: active joint names, the setpoint\'s header (stamp and '
+          "one per accepted setpoint: active joint names, the setpoint's header (stamp and "
           'frame, unchanged), the positions **as received** (not unwrapped) and the '
           'velocities used (given or estimated), the efforts'),
     Topic('effort_trajectory', 'trajectory_msgs/JointTrajectory', 'out', _CONTROL,
           'the received trajectory (same header, same `time_from_start`, positions as '
           'received), active joints only in `active_joints` order, with `effort` filled on '
-          'every point; computed in one vectorised solver call in the node\'s trajectory '
+          "every point; computed in one vectorised solver call in the node's trajectory "
           'process'),
     Topic('/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'out', 'diagnostics',
           'once a `diagnostics_period`, see "Diagnostics" below'),

@@ -1,9 +1,9 @@
 """Eq. (1)-(4) against finite differences, eq. (7) against energy, on assorted mechanisms."""
+import mechanisms as mech
 import numpy as np
 import pytest
 
 import cog_id_ros
-import mechanisms as mech
 
 
 def _paper(t):

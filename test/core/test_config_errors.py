@@ -1,8 +1,8 @@
 """Every configuration error of the mechanism parameter file (README) names its parameter."""
+from mechanisms import double_pendulum, four_bar, from_yaml, with_changes
 import pytest
 
 import cog_id_ros
-from mechanisms import double_pendulum, four_bar, from_yaml, with_changes
 
 PAPER_A = 'config/paper_four_bar_a.yaml'
 
@@ -120,7 +120,7 @@ def test_assembly_holds_the_actuators_at_their_initial_positions():
 
 # --- Reliability item 4: whatever a file or dict holds, only MechanismConfigError, fast ------
 
-LOAD_CHILD = r'''
+LOAD_CHILD = r"""
 import json, sys, time
 import cog_id_ros
 start = time.perf_counter()
@@ -132,7 +132,7 @@ except BaseException as exc:  # noqa: BLE001 -- report whatever came out
            'message': str(exc)[:500]}
 out['seconds'] = time.perf_counter() - start
 print(json.dumps(out))
-'''
+"""
 
 
 def _paper_a_text():
@@ -415,7 +415,7 @@ def test_a_slightly_moved_redundant_actuator_is_noted():
                            mechanism__initial_positions=[1.5708, -1.5708, 1.5707, 1.5708])
     with pytest.warns(AssemblyWarning, match='within mechanism.setpoint_tolerance'):
         mech = cog_id_ros.Mechanism.from_parameters(rounded)
-    assert any("from 1.5707 to" in note for note in mech.assembly_warnings)
+    assert any('from 1.5707 to' in note for note in mech.assembly_warnings)
 
 
 def test_the_example_mechanisms_load_without_assembly_notes():
@@ -423,6 +423,7 @@ def test_the_example_mechanisms_load_without_assembly_notes():
     its initial_positions say, without a note (guards the thresholds of the notes)."""
     import glob
     import warnings
+
     from cog_id_ros.core.mechanism import AssemblyWarning
     files = sorted(glob.glob('config/*.yaml'))
     assert len(files) >= 6

@@ -124,7 +124,7 @@ def test_active_joints_and_jacobian_columns_above_the_limits_are_refused():
     assert f'{n * n} COG Jacobian columns, more than the supported {columns}' in str(error)
 
 
-FAR_ABOVE = r'''
+FAR_ABOVE = r"""
 import json, sys, time
 import cog_id_ros
 start = time.perf_counter()
@@ -136,7 +136,7 @@ except BaseException as exc:  # noqa: BLE001
            'message': str(exc)[:300]}
 out['seconds'] = time.perf_counter() - start
 print(json.dumps(out))
-'''
+"""
 
 
 @pytest.mark.parametrize('joints,parameter', [(1000, 'mechanism.joints'), (10000, 'params_file')])

@@ -4,11 +4,11 @@ batch path keeps only samples that sample-by-sample continuation would reach."""
 import math
 import time
 
+from mechanisms import from_yaml, with_changes
 import numpy as np
 import pytest
 
 import cog_id_ros
-from mechanisms import from_yaml, with_changes
 
 
 def solver(name='slider_crank', **changes):

@@ -874,8 +874,8 @@ class NodeFuzzer:
     (seeded), published into ``namespace``; records every output of the node."""
 
     def __init__(self, context, namespace, active, seed):
-        import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
+        import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray

@@ -1,9 +1,9 @@
 """The paper's example (Fig. 2): the parallelogram four-bar, (a) one actuator, (b) two."""
+from mechanisms import from_yaml, with_changes
 import numpy as np
 import pytest
 
 import cog_id_ros
-from mechanisms import from_yaml, with_changes
 
 M_LINK, L, G = 1.0, 0.5, 9.81
 

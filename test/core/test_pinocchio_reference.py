@@ -21,7 +21,7 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 from pinocchio_reference import Oracle, load_params, rpy_matrix, transform  # noqa: E402
-from trajectories import DRIVERS, T_END, TRAJECTORIES, config_path, oracle, sample  # noqa: E402
+from trajectories import T_END, TRAJECTORIES, config_path, oracle, sample  # noqa: E402
 
 CONFIGS = sorted(os.path.basename(p) for p in glob.glob(os.path.join(REPO, 'config', '*.yaml')))
 WITH_TRAJ = [c for c in CONFIGS if c in TRAJECTORIES]
@@ -134,7 +134,7 @@ def test_slider_crank_by_hand(followed):
     the slider frame is at world (q_slide, 0.02), its wrist pin at (q_slide - 0.01, 0.03)."""
     o = oracle('slider_crank.yaml')
     q_all = followed('slider_crank.yaml')[4]
-    r, l, e = 0.08, 0.25, 0.03
+    r, l, e = 0.08, 0.25, 0.03  # noqa: E741 (the paper's names)
     th = q_all[:, 0]
     x_pin = r * np.cos(th) + np.sqrt(l ** 2 - (e - r * np.sin(th)) ** 2)
     assert np.allclose(q_all[:, 3], x_pin + 0.01, atol=1e-12, rtol=0)
@@ -234,8 +234,9 @@ def test_trajectory_derivatives_and_consistency(name):
     assert np.abs(_stencil(lambda s: traj(s)[1], t, h) - qdd).max() < 1e-7 * max(1, np.abs(qdd).max())
     q0 = traj(np.array([0.0]))[0][0]
     assert np.allclose(q0, o.initial_positions[o.ia], atol=1e-12)
+    qq = o.initial_positions
     for k in range(t.size):
-        qq = o.solve_positions(q[k], o.initial_positions if k == 0 else qq)
+        qq = o.solve_positions(q[k], qq)
         assert np.abs(o.closure(qq)).max() < 1e-12
         assert np.allclose(qq[o.ia], q[k], atol=1e-12)
     ts, qs, _, _ = sample(name, 50)
@@ -293,7 +294,7 @@ CORE_FILE = os.path.join(REPO, 'cog_id_ros', 'core', 'inverse_dynamics.py')
 def cog():
     if not os.path.exists(CORE_FILE):
         pytest.skip('cog_id_ros core not written yet (no cog_id_ros/core/inverse_dynamics.py)')
-    import cog_id_ros   # once the core exists, failing to import it is a failure, not a skip
+    import cog_id_ros  # once the core exists, failing to import it is a failure, not a skip
     assert hasattr(cog_id_ros, 'InverseDynamics') and hasattr(cog_id_ros, 'Mechanism')
     return cog_id_ros
 

@@ -1,9 +1,9 @@
 """Setpoints the mechanism cannot honour: clear errors, no NaN, the next good one still served."""
+from mechanisms import four_bar, from_yaml, slider_crank
 import numpy as np
 import pytest
 
 import cog_id_ros
-from mechanisms import four_bar, from_yaml, slider_crank
 
 
 def make(params):
@@ -68,9 +68,9 @@ def test_non_finite_setpoints_are_rejected(bad):
 
 def test_wrong_shapes_are_rejected_with_the_expected_shape():
     s = make(from_yaml('config/paper_four_bar_b.yaml'))
-    with pytest.raises(cog_id_ros.SetpointError, match=r"expected shape \(2,\)"):
+    with pytest.raises(cog_id_ros.SetpointError, match=r'expected shape \(2,\)'):
         s.torques([1.5], [0.0], [0.0])
-    with pytest.raises(cog_id_ros.SetpointError, match=r"qd: expected shape \(3, 2\)"):
+    with pytest.raises(cog_id_ros.SetpointError, match=r'qd: expected shape \(3, 2\)'):
         s.torques(np.ones((3, 2)), np.ones((2, 2)), np.ones((3, 2)))
 
 

@@ -5,9 +5,9 @@ parallel to its motion and w . (w x I w) = 0), so the example mechanisms cannot 
 a spatial two-DOF pan-tilt with an unbalanced, asymmetric head does.
 """
 import numpy as np
+from pinocchio_reference import Oracle
 
 import cog_id_ros
-from pinocchio_reference import Oracle
 
 PAN_TILT = """
 /**:

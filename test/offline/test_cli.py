@@ -7,11 +7,11 @@ message (row and column) and the absence of any output file.
 import json
 import math
 import os
+from pathlib import Path
 import pty
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -15,10 +15,19 @@ import time
 
 import numpy as np
 import pytest
+from test_cli import (
+    CONFIG,
+    PARAMS_A,
+    TARGET,
+    core_torques,
+    error_lines,
+    run_tool,
+    target,
+    tool_command,
+    write_csv,
+)
 
 from cog_id_ros.offline import trajectory_io as tio
-from test_cli import CONFIG, PARAMS_A, TARGET, core_torques, error_lines, run_tool, target, \
-    tool_command, write_csv
 
 SLIDER_CRANK = CONFIG / 'slider_crank.yaml'
 
@@ -550,6 +559,7 @@ def test_efforts_near_the_largest_double_are_drawn_in_powers_of_ten(tmp_path):
     """Efforts of +-7.5e307 N m made matplotlib fail ('arange: cannot compute length') and
     the run exit 4, after RuntimeWarnings on stderr (found by the adversarial test)."""
     import warnings
+
     from cog_id_ros.offline import plotting
     efforts = np.array([[7.5e307], [-7.5e307], [1e307]])
     stats = [{'peak_effort': 7.5e307, 'peak_effort_signed': 7.5e307, 'peak_effort_time': 0.0,

@@ -17,6 +17,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 
 from builtin_interfaces.msg import Duration  # noqa: E402
+from conftest import wait_until  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
 from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
@@ -30,7 +31,6 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E
 import cog_id_ros  # noqa: E402
 from cog_id_ros.ros.node import control_qos  # noqa: E402
 from cog_id_ros.ros.player import RECORDER_QOS, Player  # noqa: E402
-from conftest import wait_until  # noqa: E402
 
 NS = 1_000_000_000
 M, L, G = 1.0, 0.5, 9.81

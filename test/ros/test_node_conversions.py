@@ -36,11 +36,11 @@ def test_a_wrapped_trajectory_is_unwrapped_before_it_is_differentiated():
 
     import numpy as np
     from rclpy.serialization import deserialize_message, serialize_message
+    from test_node import make_trajectory
     from trajectory_msgs.msg import JointTrajectory
 
     import cog_id_ros
     from cog_id_ros.ros.conversions import JointSelector, Rejected, solve_trajectory_message
-    from test_node import make_trajectory
 
     mech = cog_id_ros.Mechanism.from_params_file('config/paper_four_bar_a.yaml')
     t = np.arange(201) * 0.01

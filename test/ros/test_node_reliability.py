@@ -15,15 +15,13 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
+from conftest import wait_until  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
 from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
-
-from conftest import wait_until  # noqa: E402
 from test_node import NS, Probe, call, make_trajectory, values  # noqa: E402
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
 CONFIG_A = 'config/paper_four_bar_a.yaml'
 M, L, G = 1.0, 0.5, 9.81
@@ -311,10 +309,10 @@ def test_an_exception_in_a_timer_callback_is_counted_not_raised(rclpy_context):
     """Reliability item 1: an exception in a timer callback (diagnostics, timeout) went out
     of executor.spin() and ended the node; now it is counted in internal_errors and
     logged, and the callback returns."""
+    from mechanisms import from_yaml
     from rclpy.parameter import Parameter
 
     from cog_id_ros.ros.node import CogIdNode
-    from mechanisms import from_yaml
 
     overrides = [Parameter(name, value=value) for name, value in from_yaml(CONFIG_A).items()]
     node = CogIdNode(context=rclpy_context, parameter_overrides=overrides, namespace='/unit')

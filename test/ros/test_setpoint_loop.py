@@ -10,12 +10,12 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
+from conftest import wait_until  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from cog_id_ros.ros.node import control_qos  # noqa: E402
 from cog_id_ros.ros.setpoint_loop import SetpointLoop  # noqa: E402
-from conftest import wait_until  # noqa: E402
 
 
 @pytest.fixture
