@@ -12,5 +12,6 @@ from .errors import (REASONS, ClosureError, CogIdError, MechanismConfigError, Se
 from .inverse_dynamics import Evaluation, InverseDynamics
 from .mechanism import AssemblyWarning, Mechanism
 
-__all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation', 'InverseDynamics', 'Mechanism',
+__all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',
+           'InverseDynamics', 'Mechanism',
            'MechanismConfigError', 'SetpointError', 'SingularConfigurationError']

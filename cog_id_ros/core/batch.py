@@ -59,8 +59,8 @@ class BatchPose:
 
 def pose_of(mechanism, positions, mismatch=0.0):
     """BatchPose at given positions (N, n_joints), nothing solved."""
-    pose = closure.evaluate(mechanism.model, [positions[:, j] for j in range(len(mechanism.joints))],
-                            mechanism.free_joints, sp.ArrayOps)
+    pose = closure.evaluate(mechanism.model, columns(positions), mechanism.free_joints,
+                            sp.ArrayOps)
     return BatchPose(pose, velocity_basis(mechanism, pose), mismatch,
                      pose.lsq.condition_number())
 

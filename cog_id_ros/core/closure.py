@@ -66,7 +66,8 @@ def closure_bias(model, frames, loops, twists, bias_acc, qdot):
     """beta with A qddot + beta = 0: the closure equations differentiated twice at qddot = 0."""
     beta = []
     for lp, st in zip(model.loops, loops):
-        acc = sp.twist_add_scaled(kin.twist_of(bias_acc, lp.child), kin.twist_of(bias_acc, lp.parent), -1.0)
+        acc = sp.twist_add_scaled(kin.twist_of(bias_acc, lp.child),
+                                  kin.twist_of(bias_acc, lp.parent), -1.0)
         rate_of_xi = sp.motion_cross(kin.twist_of(twists, lp.parent), frames.xi[lp.joint])
         acc = sp.twist_add_scaled(acc, rate_of_xi, -qdot[lp.joint])
         v, w = sp.twist_at(acc, st.x)

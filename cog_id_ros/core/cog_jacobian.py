@@ -54,7 +54,8 @@ def cog_drifts(cogs, velocities, drift_accelerations):
     when thetaddot = 0, from the links' spatial accelerations at thetaddot = 0."""
     out = []
     for (c, _), (v, w), (alpha, a0) in zip(cogs, velocities, drift_accelerations):
-        # classical acceleration of a body point from a spatial acceleration: a0 + alpha x c + w x v
+        # classical acceleration of a body point from a spatial acceleration:
+        # a0 + alpha x c + w x v
         out.append((sp.add(sp.add(a0, sp.cross(alpha, c)), sp.cross(w, v)), alpha))
     return out
 

@@ -79,7 +79,8 @@ def one_sample(mechanism, wrapping, q, qd, qdd):
 def check_values(mechanism, wrapping, q, qd, qdd, single):
     """SetpointError for the first non-finite entry, or revolute position beyond
     MAX_ANGLE; returns (per-sample bool array, {sample: error})."""
-    finite = np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) & np.isfinite(qdd).all(axis=1)
+    finite = (np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) &
+              np.isfinite(qdd).all(axis=1))
     wrapping = wrapping
     in_range = (np.abs(q[:, wrapping]) <= MAX_ANGLE).all(axis=1) if wrapping else finite
     errors = {}

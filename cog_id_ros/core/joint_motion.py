@@ -38,7 +38,7 @@ def projection_gram(mechanism, basis):
     rows = [basis[j] for j in mechanism.active_index]
     dof = mechanism.dof
     va_t_winv = [[rows[a][k] * w_inv[a] for a in range(len(rows))] for k in range(dof)]
-    gram = [[sum(va_t_winv[k][a] * rows[a][l] for a in range(len(rows))) for l in range(dof)]
+    gram = [[sum(va_t_winv[k][a] * rows[a][c] for a in range(len(rows))) for c in range(dof)]
             for k in range(dof)]
     return gram, va_t_winv
 

@@ -28,7 +28,7 @@ class QRLeastSquares:
         r = [[0.0] * n for _ in range(n)]
         for j, col in enumerate(columns):
             v = col
-            for _ in range(2):  # CGS2: a second pass makes the columns orthogonal to working precision
+            for _ in range(2):  # CGS2: a second pass makes them orthogonal to working precision
                 for i, qi in enumerate(q):
                     rij = _dot(qi, v)
                     r[i][j] = r[i][j] + rij

@@ -14,6 +14,7 @@ friends) so that finite, moderate setpoints never produce an infinite torque.
 """
 import itertools
 import math
+import os  # noqa: F401 (type hints)
 import re
 import warnings
 
@@ -102,14 +103,16 @@ class Mechanism:
                 f'geometry and initial_positions') from None
 
     @classmethod
-    def from_parameters(cls, params):
+    def from_parameters(cls, params: dict) -> 'Mechanism':
         """From a dict of dotted parameter names (as rclpy gives them) or a nested dict."""
         if not isinstance(params, dict):
-            raise MechanismConfigError('parameters', f'must be a dict, got {type(params).__name__}')
+            raise MechanismConfigError('parameters',
+                                       f'must be a dict, got {type(params).__name__}')
         return cls(params)
 
     @classmethod
-    def from_params_file(cls, path, node_name='cog_id_node'):
+    def from_params_file(cls, path: 'str | os.PathLike', node_name: str = 'cog_id_node'
+                         ) -> 'Mechanism':
         """From a ROS 2 parameter file (node entry ``node_name`` or ``/**``).
 
         The file is read by :mod:`cog_id_ros.params_file` (the ROS conventions live outside
@@ -137,7 +140,8 @@ class Mechanism:
             raise MechanismConfigError('mechanism.active_joints', 'must name at least one joint')
         if self.base_link in self.links:
             raise MechanismConfigError(
-                'mechanism.links', f"the base link '{self.base_link}' must not be listed: it does not move")
+                'mechanism.links',
+                f"the base link '{self.base_link}' must not be listed: it does not move")
         for name in self.active_joints:
             if name not in self.joints:
                 raise MechanismConfigError(
@@ -223,15 +227,16 @@ class Mechanism:
             axis = r.vector(prefix + 'axis', 3, default=(0.0, 0.0, 1.0))
             norm = math.hypot(*axis)     # no overflow near 1e308, no underflow near 1e-308
             if not norm > 0.0:
-                raise MechanismConfigError(prefix + 'axis', f'must not be zero-length, got {list(axis)}')
+                raise MechanismConfigError(prefix + 'axis',
+                                           f'must not be zero-length, got {list(axis)}')
             self.joint_types.append(kind)
             offsets = {}
             for key, bound, unit in (('parent_xyz', MAX_LENGTH, 'm'),
                                      ('parent_rpy', MAX_COORDINATE, 'rad'),
                                      ('child_xyz', MAX_LENGTH, 'm'),
                                      ('child_rpy', MAX_COORDINATE, 'rad')):
-                offsets[key] = _bounded(prefix + key, r.vector(prefix + key, 3, default=(0.0, 0.0, 0.0)),
-                                        bound, unit)
+                value = r.vector(prefix + key, 3, default=(0.0, 0.0, 0.0))
+                offsets[key] = _bounded(prefix + key, value, bound, unit)
             self.joint_specs.append(JointSpec(
                 name=joint, revolute=(kind == 'revolute'), parent=ends[0], child=ends[1],
                 axis=tuple(a / norm for a in axis), **offsets))
@@ -292,7 +297,7 @@ class Mechanism:
                     self._note(f"assembly moved active joint '{self.joints[j]}' from "
                                f'{start[j]:.9g} to {q[j]:.9g} (by {abs(q[j] - start[j]):.3g}, '
                                f'within mechanism.setpoint_tolerance) to close the loops: the '
-                               f'actuators\' initial_positions disagree slightly with the loop '
+                               f"actuators' initial_positions disagree slightly with the loop "
                                f'closure')
         self.assembled_positions = tuple(q)
         self._report_far_moves(start, q)

@@ -78,7 +78,8 @@ class SampleSolver:
                 if ratio <= cap * (1.0 + 1e-9):      # (not a sliver of a step left over)
                     size, goal, final = ratio, target, True
                 else:
-                    size, goal, final = cap, intermediate_goal(m, state, target, cap / ratio), False
+                    size, final = cap, False
+                    goal = intermediate_goal(m, state, target, cap / ratio)
                     predicted, _ = prediction(m, state, goal)
             try:
                 record, new_state, closed = self.step(predicted, goal, final, qd, qdd, sample)
@@ -86,8 +87,8 @@ class SampleSolver:
                 if final:
                     raise
                 if exc.reason != 'closure' or cap < MIN_STEP:
-                    raise unreachable(m, start, target, sample,
-                                      f'the loops stop closing on the way, at {_fmt(goal)}') from None
+                    raise unreachable(m, start, target, sample, f'the loops stop closing on '
+                                      f'the way, at {_fmt(goal)}') from None
                 cap = size / 2.0      # Newton failed on the way: try a shorter step
                 continue
             except SingularConfigurationError as exc:
@@ -109,7 +110,8 @@ class SampleSolver:
             state, cap = new_state, min(1.0, cap * 2.0)
             ahead, moved = prediction(m, state, target)
             one_step = fits_one_step(m, limits, state, target, moved)
-        raise unreachable(m, start, target, sample, f'not reached in {MAX_STEPS} continuation steps')
+        raise unreachable(m, start, target, sample,
+                          f'not reached in {MAX_STEPS} continuation steps')
 
     def step(self, predicted, goal, final, qd, qdd, sample):
         """One continuation step: close the loops from ``predicted``, check, and on the final

@@ -9,8 +9,9 @@ mechanism written in 3-D is full of. Here the same code runs once, at load time,
 * equal operations on equal operands are recorded once (common subexpressions);
 * operations no output depends on are dropped;
 
-and emitter.py writes what is left as one function of plain float statements. The operations that remain are those the float path would do, in the same
-order, so the results agree with it to the last bit (up to the sign of a zero).
+and emitter.py writes what is left as one function of plain float statements. The
+operations that remain are those the float path would do, in the same order, so the
+results agree with it to the last bit (up to the sign of a zero).
 
 Only branch-free lane code can be traced: a comparison of a ``Sym`` raises TypeError.
 """
