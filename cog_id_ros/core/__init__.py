@@ -1,14 +1,24 @@
 """cog_id_ros.core: closed-link inverse dynamics by per-link COG Jacobians (numpy only).
 
 Where the paper's equations live:
+  eq. (1)-(7)  pipeline.py        inverse_dynamics(): the whole method at a closed pose, in
+                                  the paper's order; equation_of_motion(): H and B
   eq. (1)-(4)  cog_jacobian.py    g_i, G_i = dg_i/dtheta_m, Gdot_i thetadot_m
   eq. (5)      newton_euler.py    F_i = M_i qddot_i + b_i
-  eq. (6)-(7)  inverse_dynamics.py   tau = sum_i G_i^T F_i = H thetaddot + B
 and what they stand on: closure.py (loop equations, Newton), joint_motion.py (actuator to
 joint rates), kinematics.py (tree, poses, twists), spatial.py / lane_linalg.py (algebra).
+Who runs them: sample_solve.py (one sample: continuation, Newton, checks) calling the
+kernels of kernels.py; batch.py (N samples on arrays); inverse_dynamics.py (the solver
+users call, InverseDynamics); inputs.py (what it accepts).
 """
-from .errors import (REASONS, ClosureError, CogIdError, MechanismConfigError, SetpointError,
-                     SingularConfigurationError)
+from .errors import (
+    REASONS,
+    ClosureError,
+    CogIdError,
+    MechanismConfigError,
+    SetpointError,
+    SingularConfigurationError,
+)
 from .inverse_dynamics import Evaluation, InverseDynamics
 from .mechanism import AssemblyWarning, Mechanism
 

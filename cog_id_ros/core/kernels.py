@@ -20,8 +20,8 @@ Backends (``InverseDynamics(mechanism, backend=...)``):
 * ``'auto'``: ``'python'`` unless the mechanism is too large to trace quickly
   (:data:`TRACE_BUDGET`), then ``'reference'``.
 """
-import weakref
 from typing import NamedTuple
+import weakref
 
 from . import closure
 from . import spatial as sp

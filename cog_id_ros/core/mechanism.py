@@ -21,9 +21,9 @@ import warnings
 import numpy as np
 
 from . import closure
+from . import kinematics as kin
 from . import spatial as sp
 from .errors import MechanismConfigError
-from . import kinematics as kin
 from .kinematics import BASE, JointSpec, KinematicModel
 from .parameters import ParameterReader
 

@@ -175,7 +175,8 @@ def _check_length(name, value):
 
 
 def as_float(name, value):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) and not _is_number_like(value):
+    if isinstance(value, bool) or \
+            not isinstance(value, (int, float)) and not _is_number_like(value):
         raise MechanismConfigError(name, f'must be a number, got {show(value)}')
     try:
         number = float(value)

@@ -17,8 +17,7 @@ which: spatial.ScalarOps, spatial.ArrayOps or straight_line.SymOps.
 """
 from . import closure
 from . import spatial as sp
-from .cog_jacobian import (cog_accelerations, cog_drifts, cog_jacobians, cog_poses,
-                           cog_velocities)
+from .cog_jacobian import cog_accelerations, cog_drifts, cog_jacobians, cog_poses, cog_velocities
 from .joint_motion import active_velocity_map, closure_drift, combine
 from .kinematics import link_bias_accelerations, link_twists
 from .newton_euler import newton_euler_force, rotated_inertia_times

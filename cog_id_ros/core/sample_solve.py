@@ -17,9 +17,20 @@ here.
 """
 import math
 
-from .continuation import (MAX_STEPS, MIN_STEP, actuator_ratio, correction_bounds,
-                           correction_ok, fits_one_step, intermediate_goal, joint_step_limits,
-                           prediction, revolute_active, step_ratio, wrapped_state)
+from .continuation import (
+    MAX_STEPS,
+    MIN_STEP,
+    actuator_ratio,
+    correction_bounds,
+    correction_ok,
+    fits_one_step,
+    intermediate_goal,
+    joint_step_limits,
+    prediction,
+    revolute_active,
+    step_ratio,
+    wrapped_state,
+)
 from .errors import ClosureError, SingularConfigurationError
 from .joint_motion import projected_pose
 

@@ -17,6 +17,7 @@ Only branch-free lane code can be traced: a comparison of a ``Sym`` raises TypeE
 """
 import math
 
+
 class Graph:
     """The recorded operations: node k is (op, operands); operands are node ids or floats."""
 

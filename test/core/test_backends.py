@@ -7,17 +7,23 @@ so the comparisons here are exact, not a tolerance of the method.
 import math
 from typing import NamedTuple
 
+from mechanisms import four_bar, from_yaml
 import numpy as np
 import pytest
+from trajectories import TRAJECTORIES, config_path, sample
 
 import cog_id_ros
 from cog_id_ros.core.emitter import python_function, python_source
-from cog_id_ros.core.kernels import (BACKENDS, ClosureRecord, PoseRecord, PythonKernels,
-                                     ReferenceKernels, kernels_for)
+from cog_id_ros.core.kernels import (
+    BACKENDS,
+    ClosureRecord,
+    PoseRecord,
+    PythonKernels,
+    ReferenceKernels,
+    kernels_for,
+)
 from cog_id_ros.core.sample_solve import SampleSolver
 from cog_id_ros.core.straight_line import Graph, SymOps
-from mechanisms import four_bar, from_yaml
-from trajectories import TRAJECTORIES, config_path, sample
 
 MECHANISMS = {name: cog_id_ros.Mechanism.from_params_file(config_path(name))
               for name in TRAJECTORIES}
