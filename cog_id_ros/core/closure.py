@@ -94,7 +94,8 @@ def evaluate(model, q, free, ops):
     sol.loops = loop_closure(model, sol.frames, q, ops)
     sol.residual = ops.maxabs([r for st in sol.loops for r in st.residual])
     sol.columns = closure_jacobian_columns(model, sol.frames, sol.loops)
-    sol.lsq = QRLeastSquares([sol.columns[j] for j in free], ops)
+    sol.lsq = QRLeastSquares([sol.columns[j] for j in free], ops,
+                             model.elimination_order(free))
     return sol
 
 

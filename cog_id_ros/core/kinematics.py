@@ -130,6 +130,26 @@ class KinematicModel:
                 self.loops.append(loop)
         self.tree_joints = [e.joint for e in self.edges]
         self.loop_joints = [lp.joint for lp in self.loops]
+        #: per joint, the indices of the loops whose closure equations it enters
+        self.loops_of_joint = [[] for _ in range(self.n_joints)]
+        for li, lp in enumerate(self.loops):
+            for j in [j for j, _ in lp.cycle] + [lp.joint]:
+                self.loops_of_joint[j].append(li)
+        self._orders = {}
+
+    def elimination_order(self, columns):
+        """Positions into ``columns`` (joint indices) in the order the closure's least squares
+        factorises them: joints of fewer loops first, grouped by loop. A leg of a parallel
+        robot enters only its own loop and comes first; the joints shared by every loop (the
+        path to the platform) come last, so each leg adds a fixed amount of work."""
+        key = tuple(columns)
+        order = self._orders.get(key)
+        if order is None:
+            loops = self.loops_of_joint
+            order = self._orders[key] = sorted(
+                range(len(columns)),
+                key=lambda k: (len(loops[columns[k]]), loops[columns[k]], k))
+        return order
 
 
 def _paths_below_common_ancestor(up, depth, a, b):

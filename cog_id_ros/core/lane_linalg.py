@@ -19,11 +19,19 @@ class QRLeastSquares:
 
     A = Q R with Q's columns orthonormal and R square upper triangular; R^-1 is formed once
     (it serves every solve and the condition number), so a solve is Q^T b and a product.
+
+    ``order`` (a permutation) factorises the columns in that order; solve() still answers
+    in the order given. Columns that touch few rows first keep Q and R sparse: a column
+    with no row in common with an earlier one needs no work against it, and traced code
+    (straight_line.py) drops operations on structural zeros.
     """
 
-    def __init__(self, columns, ops):
+    def __init__(self, columns, ops, order=None):
         self.ops = ops
         n = self.n = len(columns)
+        self.order = None if order is None or list(order) == list(range(n)) else list(order)
+        if self.order is not None:
+            columns = [columns[i] for i in self.order]
         q = self.q = []
         r = [[0.0] * n for _ in range(n)]
         for j, col in enumerate(columns):
@@ -53,7 +61,13 @@ class QRLeastSquares:
     def solve(self, b):
         """x minimising ||A x - b|| (b: list of lanes, one per row)."""
         y = [_dot(qi, b) for qi in self.q]
-        return [_dot(row[i:], y[i:]) for i, row in enumerate(self.rinv)]
+        x = [_dot(row[i:], y[i:]) for i, row in enumerate(self.rinv)]
+        if self.order is None:
+            return x
+        out = [None] * self.n
+        for k, i in enumerate(self.order):
+            out[i] = x[k]
+        return out
 
     def condition_number(self):
         """Frobenius-norm condition number ||A||_F ||A^+||_F = ||R||_F ||R^-1||_F.
