@@ -50,11 +50,8 @@ def python_source(name, params, record, fields):
     names = {}
     lines = [f'def {name}({", ".join(p for p, _ in params)}):']
     for p, syms in params:
-        for i, s in enumerate(syms):
-            names[s.k] = f'{p}_{i}'
         if syms:
-            comma = ',' if len(syms) == 1 else ''
-            lines.append(f'    {", ".join(names[s.k] for s in syms)}{comma} = {p}')
+            lines.append(f'    {_unpacking(p, syms, names)} = {p}')
 
     def operand(a):
         return names[a] if isinstance(a, int) else _literal(a)
@@ -77,6 +74,18 @@ def python_source(name, params, record, fields):
     return '\n'.join(lines) + '\n', len(operations)
 
 
+def _unpacking(prefix, syms, names):
+    """The target list that unpacks a parameter (nested lists: rows) into its inputs."""
+    items = []
+    for i, s in enumerate(syms):
+        if isinstance(s, (list, tuple)):
+            items.append('(' + _unpacking(f'{prefix}_{i}', s, names) + ')')
+        else:
+            names[s.k] = f'{prefix}_{i}'
+            items.append(names[s.k])
+    return ', '.join(items) + (',' if len(items) == 1 else '')
+
+
 def python_function(name, params, record_type, fields):
     """The function of :func:`python_source`, compiled; returns (function, source, count)."""
     source, count = python_source(name, params, record_type.__name__, fields)
@@ -94,3 +103,244 @@ def _literal(x):
         return 'inf' if x > 0 else '-inf'
     text = repr(x)
     return f'({text})' if x < 0 or text.startswith('-') else text
+
+
+# --- C ---------------------------------------------------------------------------------
+
+#: each operation as a C expression, with the same special cases as PYTHON_EXPRESSIONS
+C_EXPRESSIONS = {
+    'neg': '-{0}',
+    'sin': 'sin({0})',
+    'cos': 'cos({0})',
+    'sqrt': '({0} >= 0.0 ? sqrt({0}) : NAN)',
+    'recip': '({0} != 0.0 ? 1.0 / {0} : INFINITY)',
+    'add': '{0} + {1}',
+    'sub': '{0} - {1}',
+    'mul': '{0} * {1}',
+    'div': '{0} / {1}',
+}
+
+_C_PRELUDE = r"""/* Kernels of one mechanism, emitted by cog_id_ros.core.emitter: do not edit. */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+
+static PyObject *record_type[%(n_kernels)d];
+
+/* n doubles from a sequence of numbers; -1 and a Python error when it is not one */
+static int read_doubles(PyObject *seq, double *dst, Py_ssize_t n, const char *name)
+{
+    PyObject *fast = PySequence_Fast(seq, name);
+    if (fast == NULL)
+        return -1;
+    if (PySequence_Fast_GET_SIZE(fast) != n) {
+        PyErr_Format(PyExc_ValueError, "%%s: expected %%zd values, got %%zd", name, n,
+                     PySequence_Fast_GET_SIZE(fast));
+        Py_DECREF(fast);
+        return -1;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(fast);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        dst[i] = PyFloat_AsDouble(items[i]);
+        if (dst[i] == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(fast);
+            return -1;
+        }
+    }
+    Py_DECREF(fast);
+    return 0;
+}
+
+/* n_rows sequences of `width` numbers, row after row */
+static int read_rows(PyObject *seq, double *dst, Py_ssize_t n_rows, Py_ssize_t width,
+                     const char *name)
+{
+    PyObject *fast = PySequence_Fast(seq, name);
+    if (fast == NULL)
+        return -1;
+    if (PySequence_Fast_GET_SIZE(fast) != n_rows) {
+        PyErr_Format(PyExc_ValueError, "%%s: expected %%zd rows, got %%zd", name, n_rows,
+                     PySequence_Fast_GET_SIZE(fast));
+        Py_DECREF(fast);
+        return -1;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(fast);
+    for (Py_ssize_t i = 0; i < n_rows; i++)
+        if (read_doubles(items[i], dst + i * width, width, name) < 0) {
+            Py_DECREF(fast);
+            return -1;
+        }
+    Py_DECREF(fast);
+    return 0;
+}
+
+/* a tuple of n floats */
+static PyObject *floats(const double *v, Py_ssize_t n)
+{
+    PyObject *t = PyTuple_New(n);
+    if (t == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *x = PyFloat_FromDouble(v[i]);
+        if (x == NULL) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, x);
+    }
+    return t;
+}
+
+/* a tuple of n_rows tuples of `width` floats */
+static PyObject *rows(const double *v, Py_ssize_t n_rows, Py_ssize_t width)
+{
+    PyObject *t = PyTuple_New(n_rows);
+    if (t == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n_rows; i++) {
+        PyObject *row = floats(v + i * width, width);
+        if (row == NULL) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, row);
+    }
+    return t;
+}
+
+/* the record type's instance (a tuple subclass) of `fields`, which it takes over */
+static PyObject *record(int kind, PyObject *fields)
+{
+    if (fields == NULL)
+        return NULL;
+    PyObject *args = PyTuple_Pack(1, fields);
+    Py_DECREF(fields);
+    if (args == NULL)
+        return NULL;
+    PyObject *out = PyTuple_Type.tp_new((PyTypeObject *)record_type[kind], args, NULL);
+    Py_DECREF(args);
+    return out;
+}
+
+static PyObject *set_record_types(PyObject *self, PyObject *args)
+{
+    for (int i = 0; i < %(n_kernels)d; i++) {
+        PyObject *t = PyTuple_GetItem(args, i);
+        if (t == NULL)
+            return NULL;
+        Py_INCREF(t);
+        Py_XSETREF(record_type[i], t);
+    }
+    Py_RETURN_NONE;
+}
+"""
+
+
+def _c_literal(x):
+    x = float(x)
+    if math.isnan(x):
+        return 'NAN'
+    if math.isinf(x):
+        return 'INFINITY' if x > 0 else '(-INFINITY)'
+    text = repr(x)
+    return f'({text})' if x < 0 or text.startswith('-') else text
+
+
+def _field_shape(value):
+    """('scalar',) | ('vector', n) | ('rows', n_rows, width) of a record field's value."""
+    if not isinstance(value, (list, tuple)):
+        return ('scalar',)
+    if value and isinstance(value[0], (list, tuple)):
+        return ('rows', len(value), len(value[0]))
+    return ('vector', len(value))
+
+
+def c_kernel_source(index, name, params, fields):
+    """C source of one kernel ``name(*params)`` returning record type ``index``'s instance
+    of ``fields`` (as :func:`python_source`). Returns (source, number of operations)."""
+    outputs = [x for _, value in fields for x in leaves(value)]
+    graph = next((o.graph for o in outputs if isinstance(o, Sym)), None) or \
+        next((s.graph for _, syms in params for s in syms), None)
+    names = {}
+    for p, syms in params:
+        for k, s in enumerate(leaves(syms)):
+            names[s.k] = f'{p}[{k}]'
+    operations = live_operations(graph, outputs) if graph is not None else []
+    for k in operations:
+        names[k] = f't{k}'
+
+    def operand(a):
+        return names[a] if isinstance(a, int) else _c_literal(a)
+
+    lines = [f'static PyObject *kernel_{name}(PyObject *self, PyObject *const *args, '
+             f'Py_ssize_t nargs)', '{',
+             f'    if (nargs != {len(params)}) {{',
+             f'        PyErr_SetString(PyExc_TypeError, "{name}() takes {len(params)} '
+             f'arguments");',
+             '        return NULL;',
+             '    }']
+    for i, (p, syms) in enumerate(params):
+        shape = _field_shape(syms)
+        size = len(leaves(syms))
+        reader = (f'read_rows(args[{i}], {p}, {shape[1]}, {shape[2]}, "{p}")'
+                  if shape[0] == 'rows' else f'read_doubles(args[{i}], {p}, {size}, "{p}")')
+        lines += [f'    double {p}[{max(size, 1)}];',
+                  f'    if ({reader} < 0)',
+                  '        return NULL;']
+    for k in operations:
+        op, args = graph.nodes[k]
+        lines.append(f'    const double t{k} = {C_EXPRESSIONS[op].format(*map(operand, args))};')
+    values = ', '.join(operand(o.k if isinstance(o, Sym) else o) for o in outputs) or '0.0'
+    lines.append(f'    const double out[{max(len(outputs), 1)}] = {{{values}}};')
+    built, offset = [], 0
+    for field, value in fields:
+        shape = _field_shape(value)
+        if shape[0] == 'scalar':
+            built.append(f'PyFloat_FromDouble(out[{offset}])')
+            offset += 1
+        elif shape[0] == 'vector':
+            built.append(f'floats(out + {offset}, {shape[1]})')
+            offset += shape[1]
+        else:
+            built.append(f'rows(out + {offset}, {shape[1]}, {shape[2]})')
+            offset += shape[1] * shape[2]
+    n = len(built)
+    lines += [f'    PyObject *f[{n}] = {{{", ".join(built)}}};',
+              f'    PyObject *fields = PyTuple_New({n});',
+              f'    for (int i = 0; i < {n}; i++)',
+              '        if (f[i] == NULL || fields == NULL) {',
+              f'            for (int j = 0; j < {n}; j++)',
+              '                Py_XDECREF(f[j]);',
+              '            Py_XDECREF(fields);',
+              '            return NULL;',
+              '        }',
+              f'    for (int i = 0; i < {n}; i++)',
+              '        PyTuple_SET_ITEM(fields, i, f[i]);',
+              f'    return record({index}, fields);',
+              '}']
+    return '\n'.join(lines) + '\n', len(operations)
+
+
+def c_module_source(module, kernels):
+    """C source of a CPython extension module ``module`` with one function per kernel.
+
+    kernels: list of (name, params, record type name, fields) as for :func:`python_source`.
+    The module's ``set_record_types(*types)`` must be called once, with the record types in
+    the order of ``kernels``, before a kernel is. Returns (source, {name: operations}).
+    """
+    parts = [_C_PRELUDE % {'n_kernels': len(kernels)}]
+    counts = {}
+    for index, (name, params, _, fields) in enumerate(kernels):
+        source, counts[name] = c_kernel_source(index, name, params, fields)
+        parts.append(source)
+    methods = [f'    {{"{name}", (PyCFunction)(void (*)(void))kernel_{name}, METH_FASTCALL, '
+               f'"{record} of the mechanism (see cog_id_ros.core.kernels)"}},'
+               for name, _, record, _ in kernels]
+    parts.append('static PyMethodDef methods[] = {\n'
+                 '    {"set_record_types", set_record_types, METH_VARARGS, NULL},\n'
+                 + '\n'.join(methods) + '\n    {NULL, NULL, 0, NULL}\n};\n')
+    parts.append(f'static struct PyModuleDef module_def = {{PyModuleDef_HEAD_INIT, "{module}", '
+                 f'NULL, -1, methods}};\n\n'
+                 f'PyMODINIT_FUNC PyInit_{module}(void)\n{{\n'
+                 f'    return PyModule_Create(&module_def);\n}}\n')
+    return '\n'.join(parts), counts

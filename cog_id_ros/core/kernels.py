@@ -1,8 +1,10 @@
 """Kernels: the branch-free per-sample computations, and the backends that run them.
 
-Two kernels do all the arithmetic of a sample; the plain-Python glue of sample_solve.py
+Three kernels do all the arithmetic of a sample; the plain-Python glue of sample_solve.py
 calls them and makes every decision (continuation, Newton's iteration, checks):
 
+    prediction(q, basis, goal)        -> PredictionRecord: the continuation's first-order
+                                         predictor q + V dz towards the actuators' goal
     closure(q)                        -> ClosureRecord: closure equations at q and the
                                          Newton increment of the free joints
     dynamics(q, target, qd, qdd)      -> PoseRecord: the same, and at q the closure
@@ -17,15 +19,22 @@ Backends (``InverseDynamics(mechanism, backend=...)``):
 * ``'python'``: the same lane code traced once per mechanism (straight_line.py) into two
   straight-line functions (emitter.py) with constants folded and common subexpressions
   shared. Same operations in the same order: the same numbers to the last bit.
-* ``'auto'``: ``'python'`` unless the mechanism is too large to trace quickly
-  (:data:`TRACE_BUDGET`), then ``'reference'``.
+* ``'native'``: the same traced kernels written as C, compiled by the system's C
+  compiler and cached on disk (native.py). Same operations, IEEE doubles: the same numbers.
+* ``'auto'``: ``'native'`` where a compiler (or a cached library) is there, else
+  ``'python'`` with one log line saying why; ``'reference'`` for a mechanism too large to
+  trace quickly (:data:`TRACE_BUDGET`).
 """
+import hashlib
+import logging
+import os
 from typing import NamedTuple
 import weakref
 
-from . import closure
+from . import closure, native
 from . import spatial as sp
-from .emitter import python_function
+from .continuation import prediction
+from .emitter import c_module_source, python_function
 from .errors import MechanismConfigError
 from .joint_motion import projection_increment, velocity_basis
 from .pipeline import inverse_dynamics
@@ -44,6 +53,12 @@ class ClosureRecord(NamedTuple):
     residual: tuple     # Phi(q): 6 equations per loop (closure.py)
     cosines: tuple      # per loop, cosine between its attachment frames (> 0: not a half-turn)
     increment: tuple    # A_f^+ Phi, the Newton increment of the free joints (q_f -= increment)
+
+
+class PredictionRecord(NamedTuple):
+    """The continuation's first-order predictor (continuation.prediction)."""
+    predicted: tuple    # q + V dz, the primary actuators at the goal
+    moved: tuple        # V dz: how far it moves every joint
 
 
 class PoseRecord(NamedTuple):
@@ -77,12 +92,21 @@ def pose_record(mechanism, q, target, qd, qdd, ops):
                       [basis[j] for j in mechanism.free_joints], projection)
 
 
+def prediction_record(mechanism, q, basis, goal):
+    """PredictionRecord from the pose q with velocity basis V (list over joints) to the
+    goal of the actuators."""
+    return PredictionRecord(*prediction(mechanism, (q, basis), goal))
+
+
 class ReferenceKernels:
     """The kernels as lane code on Python floats."""
     name = 'reference'
 
     def __init__(self, mechanism):
         self.mechanism = mechanism
+
+    def prediction(self, q, basis, goal):
+        return prediction_record(self.mechanism, q, basis, goal)
 
     def closure(self, q):
         return closure_record(self.mechanism, q, sp.ScalarOps)[1]
@@ -91,45 +115,116 @@ class ReferenceKernels:
         return pose_record(self.mechanism, q, target, qd, qdd, sp.ScalarOps)
 
 
+def trace(mechanism):
+    """Both kernels run once on symbolic lanes: [(name, params, record type, fields)], what
+    the emitters (emitter.py) write as code."""
+    m = mechanism
+    graph = Graph()
+    q = graph.inputs('q', len(m.joints))
+    target, qd, qdd = (graph.inputs(name, len(m.active_joints))
+                       for name in ('target', 'qd', 'qdd'))
+    flat = graph.inputs('basis', len(m.joints) * m.dof)
+    basis = [flat[j * m.dof:(j + 1) * m.dof] for j in range(len(m.joints))]
+    predicted = prediction_record(m, q, basis, target)
+    _, closed = closure_record(m, q, SymOps)
+    whole = pose_record(m, q, target, qd, qdd, SymOps)
+    return [('prediction', [('q', q), ('basis', basis), ('goal', target)], PredictionRecord,
+             list(zip(PredictionRecord._fields, predicted))),
+            ('closure', [('q', q)], ClosureRecord, list(zip(ClosureRecord._fields, closed))),
+            ('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)], PoseRecord,
+             list(zip(PoseRecord._fields, whole)))]
+
+
 class PythonKernels:
     """The kernels traced into straight-line Python functions (``source`` keeps their text,
     ``operations`` their sizes)."""
     name = 'python'
 
+    def __init__(self, mechanism, traced=None):
+        self.mechanism = mechanism
+        self.source, self.operations = {}, {}
+        for name, params, record, fields in traced or trace(mechanism):
+            function, self.source[name], self.operations[name] = python_function(
+                name, params, record, fields)
+            setattr(self, name, function)
+
+
+class NativeKernels:
+    """The kernels compiled from C (native.py): a library per mechanism, cached on disk by a
+    hash of the mechanism's parameters and of this package's core, so a cached mechanism
+    loads without tracing. Raises native.NativeUnavailable when they cannot be had."""
+    name = 'native'
+
     def __init__(self, mechanism):
-        m = self.mechanism = mechanism
-        graph = Graph()
-        q = graph.inputs('q', len(m.joints))
-        target, qd, qdd = (graph.inputs(name, len(m.active_joints))
-                           for name in ('target', 'qd', 'qdd'))
-        _, closed = closure_record(m, q, SymOps)
-        whole = pose_record(m, q, target, qd, qdd, SymOps)
-        self.closure, closure_source, closure_ops = python_function(
-            'closure', [('q', q)], ClosureRecord, list(zip(ClosureRecord._fields, closed)))
-        self.dynamics, dynamics_source, dynamics_ops = python_function(
-            'dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)], PoseRecord,
-            list(zip(PoseRecord._fields, whole)))
-        self.source = {'closure': closure_source, 'dynamics': dynamics_source}
-        self.operations = {'closure': closure_ops, 'dynamics': dynamics_ops}
+        self.mechanism = mechanism
+        self.traced = None
+        key = repr(sorted(mechanism.parameters.items())) + core_version()
+        module, self.operations = native.load_module(key, self._source)
+        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
+        self.prediction = module.prediction
+        self.closure, self.dynamics = module.closure, module.dynamics
+
+    def _source(self, module):
+        """(C source of the module, operations per kernel); traces on first use."""
+        if self.traced is None:
+            self.traced = trace(self.mechanism)
+        return c_module_source(module, [(name, params, record.__name__, fields)
+                                        for name, params, record, fields in self.traced])
 
 
-_traced = weakref.WeakKeyDictionary()    # mechanism -> PythonKernels (traced once, shared)
+def core_version():
+    """A hash of the core's source files: what the kernels are made of."""
+    global _CORE_VERSION
+    if _CORE_VERSION is None:
+        digest = hashlib.sha256()
+        here = os.path.dirname(os.path.abspath(__file__))
+        for name in sorted(os.listdir(here)):
+            if name.endswith('.py'):
+                with open(os.path.join(here, name), 'rb') as f:
+                    digest.update(name.encode() + b'\0' + f.read())
+        _CORE_VERSION = digest.hexdigest()
+    return _CORE_VERSION
+
+
+_CORE_VERSION = None
+_made = {'python': weakref.WeakKeyDictionary(), 'native': weakref.WeakKeyDictionary()}
+_log = logging.getLogger('cog_id_ros')
 
 
 def kernels_for(mechanism, backend='auto'):
-    """The kernels of ``backend`` for a mechanism (traced kernels are made once and shared
-    by every solver of the mechanism)."""
+    """The kernels of ``backend`` for a mechanism (traced and compiled kernels are made once
+    and shared by every solver of the mechanism).
+
+    'auto': native where a C compiler (or a cached library) is there, else the Python
+    kernels with one log line saying why; the reference kernels above TRACE_BUDGET."""
     if backend not in BACKENDS:
         raise MechanismConfigError('backend', f'must be one of {", ".join(BACKENDS)}, '
                                               f'got {backend!r}')
-    if backend == 'native':
-        raise MechanismConfigError('backend', "'native' (compiled kernels) is not available "
-                                              "in this version: use 'auto' or 'python'")
     if backend == 'reference' or (backend == 'auto' and
                                   len(mechanism.links) * len(mechanism.active_joints) >
                                   TRACE_BUDGET):
         return ReferenceKernels(mechanism)
-    kernels = _traced.get(mechanism)
+    if backend in ('auto', 'native'):
+        kernels = _made['native'].get(mechanism)
+        if kernels is None:
+            try:
+                kernels = _made['native'][mechanism] = NativeKernels(mechanism)
+            except native.NativeUnavailable as exc:
+                if backend == 'native':
+                    raise MechanismConfigError(
+                        'backend', f"'native' needs compiled kernels, and {exc}; use 'auto' "
+                                   f"or 'python'") from None
+                if not _warned_native:
+                    _log.warning('cog_id_ros: compiled kernels unavailable (%s): using the '
+                                 "Python kernels (backend='python')", exc)
+                    _warned_native.append(str(exc))
+                backend = 'python'
+        if backend != 'python':
+            return kernels
+    kernels = _made['python'].get(mechanism)
     if kernels is None:
-        kernels = _traced[mechanism] = PythonKernels(mechanism)
+        kernels = _made['python'][mechanism] = PythonKernels(mechanism)
     return kernels
+
+
+_warned_native = []     # the fallback is said once per process

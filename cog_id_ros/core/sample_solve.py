@@ -26,7 +26,6 @@ from .continuation import (
     fits_one_step,
     intermediate_goal,
     joint_step_limits,
-    prediction,
     revolute_active,
     step_ratio,
     wrapped_state,
@@ -74,7 +73,8 @@ class SampleSolver:
         qdd = self.zeros if qdd is None else qdd
         start = state
         state = wrapped_state(m, self.wrapping, state, target)
-        ahead, moved = prediction(m, state, target)
+        predict = self.kernels.prediction
+        ahead, moved = predict(state[0], state[1], target)
         one_step = fits_one_step(m, limits, state, target, moved)
         if not one_step and actuator_ratio(m, limits, state, target) > MAX_STEPS:
             raise unreachable(m, start, target, sample,
@@ -91,7 +91,7 @@ class SampleSolver:
                 else:
                     size, final = cap, False
                     goal = intermediate_goal(m, state, target, cap / ratio)
-                    predicted, _ = prediction(m, state, goal)
+                    predicted = predict(state[0], state[1], goal).predicted
             try:
                 record, new_state, closed = self.step(predicted, goal, final, qd, qdd, sample)
             except ClosureError as exc:
@@ -119,7 +119,7 @@ class SampleSolver:
             if final:
                 return record, new_state
             state, cap = new_state, min(1.0, cap * 2.0)
-            ahead, moved = prediction(m, state, target)
+            ahead, moved = predict(state[0], state[1], target)
             one_step = fits_one_step(m, limits, state, target, moved)
         raise unreachable(m, start, target, sample,
                           f'not reached in {MAX_STEPS} continuation steps')

@@ -29,32 +29,37 @@ MECHANISMS = {name: cog_id_ros.Mechanism.from_params_file(config_path(name))
               for name in TRAJECTORIES}
 
 
-def both(name):
-    mechanism = MECHANISMS[name]
-    return (cog_id_ros.InverseDynamics(mechanism, backend='python'),
-            cog_id_ros.InverseDynamics(mechanism, backend='reference'))
+def native_or_skip(mechanism):
+    try:
+        return kernels_for(mechanism, 'native')
+    except cog_id_ros.MechanismConfigError as exc:
+        pytest.skip(f'no compiled kernels here: {exc}')
 
 
+@pytest.mark.parametrize('pair', [('python', 'reference'), ('native', 'python')])
 @pytest.mark.parametrize('name', list(TRAJECTORIES))
-def test_python_and_reference_agree_to_the_bit_along_the_test_motion(name):
+def test_backends_agree_to_the_bit_along_the_test_motion(name, pair):
     """Every example, redundant ones included: 1 kHz single samples, then the whole motion
     as one batch, then a far setpoint (continuation) and H, B of eq. (7)."""
-    python, reference = both(name)
-    assert (python.backend, reference.backend) == ('python', 'reference')
+    mechanism = MECHANISMS[name]
+    if 'native' in pair:
+        native_or_skip(mechanism)
+    one, other = (cog_id_ros.InverseDynamics(mechanism, backend=b) for b in pair)
+    assert (one.backend, other.backend) == pair
     _, q, qd, qdd = sample(name, 2001)
     for k in range(0, 2001, 4):
-        a, b = python.torques(q[k], qd[k], qdd[k]), reference.torques(q[k], qd[k], qdd[k])
+        a, b = one.torques(q[k], qd[k], qdd[k]), other.torques(q[k], qd[k], qdd[k])
         assert np.array_equal(a, b), k
-    assert np.array_equal(python.solve_positions(q[-1]), reference.solve_positions(q[-1]))
-    for solver in (python, reference):
+    assert np.array_equal(one.solve_positions(q[-1]), other.solve_positions(q[-1]))
+    for solver in (one, other):
         solver.reset()
-    assert np.array_equal(python.torques(q, qd, qdd), reference.torques(q, qd, qdd))
-    for solver in (python, reference):
+    assert np.array_equal(one.torques(q, qd, qdd), other.torques(q, qd, qdd))
+    for solver in (one, other):
         solver.reset()
-    assert np.array_equal(python.torques(q[-1], qd[-1], qdd[-1]),
-                          reference.torques(q[-1], qd[-1], qdd[-1]))
-    for x, y in zip(python.equation_of_motion(q[::100], qd[::100]),
-                    reference.equation_of_motion(q[::100], qd[::100])):
+    assert np.array_equal(one.torques(q[-1], qd[-1], qdd[-1]),
+                          other.torques(q[-1], qd[-1], qdd[-1]))
+    for x, y in zip(one.equation_of_motion(q[::100], qd[::100]),
+                    other.equation_of_motion(q[::100], qd[::100])):
         assert np.array_equal(x, y)
 
 
@@ -63,7 +68,11 @@ class Counting:
 
     def __init__(self, kernels):
         self.kernels, self.name = kernels, kernels.name
-        self.calls = {'closure': 0, 'dynamics': 0}
+        self.calls = {'prediction': 0, 'closure': 0, 'dynamics': 0}
+
+    def prediction(self, q, basis, goal):
+        self.calls['prediction'] += 1
+        return self.kernels.prediction(q, basis, goal)
 
     def closure(self, q):
         self.calls['closure'] += 1
@@ -119,8 +128,10 @@ def test_far_setpoint_takes_one_kernel_pass_per_continuation_step():
     assert np.array_equal(record.torques, fresh.torques([2.5], [0.3], [1.0]))
 
 
-@pytest.mark.parametrize('backend', ['python', 'reference'])
+@pytest.mark.parametrize('backend', ['python', 'reference', 'native'])
 def test_singular_and_unreachable_poses_raise_and_leave_the_warm_start(backend):
+    if backend == 'native':
+        native_or_skip(MECHANISMS['paper_four_bar_a.yaml'])
     mechanism = cog_id_ros.Mechanism.from_params_file('config/paper_four_bar_a.yaml')
     solver = cog_id_ros.InverseDynamics(mechanism, backend=backend)
     twin = cog_id_ros.InverseDynamics(mechanism, backend=backend)
@@ -148,11 +159,11 @@ def test_singular_and_unreachable_poses_raise_and_leave_the_warm_start(backend):
 def test_backend_is_a_public_switch():
     mechanism = MECHANISMS['five_bar_redundant.yaml']
     assert set(BACKENDS) == {'auto', 'reference', 'python', 'native'}
-    assert cog_id_ros.InverseDynamics(mechanism).backend == 'python'   # redundant too
+    for backend in ('reference', 'python'):
+        assert cog_id_ros.InverseDynamics(mechanism, backend=backend).backend == backend
+    assert cog_id_ros.InverseDynamics(mechanism).backend in ('native', 'python')
     with pytest.raises(cog_id_ros.MechanismConfigError, match='backend.*auto.*reference'):
         cog_id_ros.InverseDynamics(mechanism, backend='fast')
-    with pytest.raises(cog_id_ros.MechanismConfigError, match='backend'):
-        cog_id_ros.InverseDynamics(mechanism, backend='native')
 
 
 def test_auto_leaves_large_mechanisms_to_the_reference_kernels(monkeypatch):
@@ -173,6 +184,7 @@ def test_traced_kernels_read_as_named_records():
     kernels = kernels_for(MECHANISMS['paper_four_bar_a.yaml'], 'python')
     source = kernels.source['dynamics']
     assert source.startswith('def dynamics(q, target, qd, qdd):\n')
+    assert kernels.source['prediction'].startswith('def prediction(q, basis, goal):\n')
     for field in PoseRecord._fields:
         assert f'# {field}\n' in source
     assert kernels.source['closure'].startswith('def closure(q):\n')

@@ -1,0 +1,129 @@
+"""Compiled kernels: built once, cached on disk, and never required.
+
+Each test uses a cache directory of its own (``COG_ID_ROS_CACHE``) and a fresh Mechanism
+(kernels are shared per Mechanism object within a process).
+"""
+import glob
+import logging
+import os
+import shutil
+import time
+
+import numpy as np
+import pytest
+
+import cog_id_ros
+from cog_id_ros.core import kernels, native
+from mechanisms import from_yaml
+
+pytestmark = pytest.mark.skipif(native.compiler() is None, reason='no C compiler here')
+
+
+def fresh(name='paper_four_bar_a'):
+    return cog_id_ros.Mechanism.from_parameters(from_yaml(f'config/{name}.yaml'))
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    directory = tmp_path / 'cache'
+    monkeypatch.setenv('COG_ID_ROS_CACHE', str(directory))
+    monkeypatch.setattr(kernels, '_warned_native', [])
+    return directory
+
+
+def libraries(directory, level='*'):
+    return glob.glob(os.path.join(str(directory), f'cog_id_kernels_*.{level}.*so'))
+
+
+def test_the_first_load_builds_and_caches_and_the_next_needs_no_compiler(cache, monkeypatch):
+    solver = cog_id_ros.InverseDynamics(fresh(), backend='native')
+    assert solver.backend == 'native' and len(libraries(cache, 'O2')) == 1
+    assert len(glob.glob(str(cache / '*.c'))) == 1       # the source kept beside it
+    expected = solver.torques([1.6], [0.3], [1.0])
+    monkeypatch.setenv('CC', '/nonexistent/cc')             # no compiler from now on
+    again = cog_id_ros.InverseDynamics(fresh(), backend='native')
+    assert again.backend == 'native'
+    assert np.array_equal(again.torques([1.6], [0.3], [1.0]), expected)
+    assert kernels.kernels_for(again.mechanism, 'native').operations == \
+        kernels.kernels_for(fresh(), 'python').operations
+
+
+def test_a_changed_mechanism_is_a_new_library(cache):
+    params = from_yaml('config/paper_four_bar_a.yaml')
+    cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(params), backend='native')
+    params['links.link2.mass'] = params['links.link2.mass'] * 2.0
+    heavier = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(params),
+                                         backend='native')
+    assert len(libraries(cache)) == 2
+    reference = cog_id_ros.InverseDynamics(heavier.mechanism, backend='reference')
+    assert np.array_equal(heavier.torques([1.6], [0.3], [1.0]),
+                          reference.torques([1.6], [0.3], [1.0]))
+
+
+def test_without_a_compiler_auto_says_so_once_and_uses_the_python_kernels(cache, monkeypatch,
+                                                                          caplog):
+    monkeypatch.setenv('CC', '/nonexistent/cc')
+    with caplog.at_level(logging.WARNING, logger='cog_id_ros'):
+        solvers = [cog_id_ros.InverseDynamics(fresh(name)) for name in
+                   ('paper_four_bar_a', 'slider_crank')]
+    assert [s.backend for s in solvers] == ['python', 'python']
+    said = [r.getMessage() for r in caplog.records if 'compiled kernels' in r.getMessage()]
+    assert len(said) == 1 and 'no C compiler' in said[0] and "backend='python'" in said[0]
+    with pytest.raises(cog_id_ros.MechanismConfigError, match="backend.*'native'.*compiler"):
+        cog_id_ros.InverseDynamics(fresh(), backend='native')
+
+
+def test_a_compiler_that_fails_is_no_compiled_kernels(cache, monkeypatch, tmp_path):
+    broken = tmp_path / 'cc'
+    broken.write_text('#!/bin/sh\necho "cc: internal error" >&2\nexit 1\n')
+    broken.chmod(0o755)
+    monkeypatch.setenv('CC', str(broken))
+    assert cog_id_ros.InverseDynamics(fresh()).backend == 'python'
+    with pytest.raises(cog_id_ros.MechanismConfigError, match='failed: cc: internal error'):
+        cog_id_ros.InverseDynamics(fresh(), backend='native')
+
+
+def test_a_cache_that_cannot_be_written_builds_for_this_process_only(tmp_path, monkeypatch):
+    not_a_directory = tmp_path / 'file'
+    not_a_directory.write_text('')
+    monkeypatch.setenv('COG_ID_ROS_CACHE', str(not_a_directory / 'cache'))
+    solver = cog_id_ros.InverseDynamics(fresh(), backend='native')
+    assert solver.backend == 'native'
+    assert np.isfinite(solver.torques([1.6])).all()
+
+
+def test_a_cached_library_is_used_from_a_copy_elsewhere(cache, monkeypatch, tmp_path):
+    """What an install does: libraries built once, copied to a location users only read."""
+    cog_id_ros.InverseDynamics(fresh(), backend='native')
+    shipped = tmp_path / 'shipped'
+    shutil.copytree(cache, shipped)
+    monkeypatch.setenv('COG_ID_ROS_CACHE', str(shipped))
+    monkeypatch.setenv('CC', '/nonexistent/cc')
+    started = time.perf_counter()
+    assert cog_id_ros.InverseDynamics(fresh(), backend='native').backend == 'native'
+    assert time.perf_counter() - started < 5.0        # loaded, not built (no compiler)
+
+
+def test_large_kernels_load_quickly_and_are_optimised_in_the_background(cache, monkeypatch):
+    monkeypatch.setattr(native, 'QUICK_ABOVE', 0)
+    solver = cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
+    assert len(libraries(cache, 'O0')) == 1
+    deadline = time.monotonic() + 60.0
+    while not libraries(cache, 'O2') and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert len(libraries(cache, 'O2')) == 1
+    assert not glob.glob(str(cache / '*.tmp'))
+    again = cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
+    assert np.array_equal(again.torques([0.4], [1.0], [0.0]), solver.torques([0.4], [1.0], [0.0]))
+
+
+def test_bad_input_to_a_compiled_kernel_is_a_python_error_not_a_crash(cache):
+    compiled = kernels.kernels_for(fresh(), 'native')
+    with pytest.raises(ValueError, match='q: expected 4 values'):
+        compiled.closure([1.0, 2.0])
+    with pytest.raises(TypeError):
+        compiled.closure([1.0, 2.0, 'x', 4.0])
+    with pytest.raises(TypeError):
+        compiled.dynamics([0.0] * 4)
+    record = compiled.closure((1.6, 0.0, 0.0, 0.0))
+    assert isinstance(record, kernels.ClosureRecord)
