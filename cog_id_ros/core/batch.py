@@ -21,9 +21,14 @@ from . import spatial as sp
 from .continuation import correction_ok, fits_one_step, prediction
 from .errors import CogIdError
 from .inputs import check_values, out_of_range
-from .joint_motion import projected_pose, projection_increment, velocity_basis
-from .pipeline import inverse_dynamics
-from .sample_solve import NEWTON_ITERATIONS, PROJECTION_ITERATIONS, PROJECTION_TOLERANCE
+from .joint_motion import velocity_basis
+from .kernels import ClosureRecord, PoseRecord, unpack
+from .sample_solve import (
+    NEWTON_ITERATIONS,
+    NEWTON_MAX_INCREMENT,
+    PROJECTION_ITERATIONS,
+    PROJECTION_TOLERANCE,
+)
 
 
 class Evaluation:
@@ -71,6 +76,7 @@ class Batch:
     def __init__(self, mechanism, sample_solver):
         self.mechanism = mechanism
         self.serial = sample_solver
+        self.kernels = sample_solver.kernels
 
     def evaluate(self, state, q, qd, qdd, on_invalid):
         """(Evaluation of N > 1 samples, new state)."""
@@ -84,13 +90,12 @@ class Batch:
             for i in np.flatnonzero(~finite):
                 q[i] = q[i - 1] if i > 0 else [state[0][j] for j in m.active_index]
         with np.errstate(all='ignore'):
-            poses, positions, ok, errors, new_state = self.positions(state, q, on_invalid,
-                                                                     invalid=~finite)
-            tau = inverse_dynamics(m, poses.pose, poses.basis, columns(qd), columns(qdd),
-                                   sp.ArrayOps)
-            tau = np.column_stack(np.broadcast_arrays(*tau, np.zeros(n))[:-1])
-            residual = np.broadcast_to(poses.pose.residual, (n,)).copy()
-            condition = np.broadcast_to(poses.condition, (n,)).copy()
+            solved = self.positions(state, q, on_invalid, invalid=~finite, qd=qd, qdd=qdd)
+            positions, ok, errors, new_state = solved[1:]
+            record = solved[0]
+            tau = record.torques.copy()
+            residual = np.abs(record.residual).max(axis=1, initial=0.0)
+            condition = record.condition.copy()
         for i, exc in errors_in.items():
             errors[i] = exc
         ok &= finite & np.isfinite(tau).all(axis=1)
@@ -106,15 +111,19 @@ class Batch:
         return Evaluation(tau, ok, errors, positions, positions[:, m.active_index], residual,
                           condition), new_state
 
-    def positions(self, state, qa, on_invalid, invalid=None):
+    def positions(self, state, qa, on_invalid, invalid=None, qd=None, qdd=None):
         """Solve N samples of active coordinates ``qa`` (N, M) from the warm start ``state``.
 
-        Returns (BatchPose, positions (N, n_joints), ok (N,), errors list, new state)."""
+        Returns (PoseRecord of arrays at the solutions, with the rates ``qd``, ``qdd``
+        (default zeros); positions (N, n_joints), ok (N,), errors list, new state)."""
         m = self.mechanism
         n = len(qa)
+        qd = np.zeros_like(qa) if qd is None else qd
+        qdd = np.zeros_like(qa) if qdd is None else qdd
         if n == 0:
             empty = np.zeros((0, len(m.joints)))
-            return pose_of(m, empty), empty, np.zeros(0, bool), [], state
+            flat = self.kernels.dynamics_many(empty, qa, qd, qdd)
+            return self.record(flat), empty, np.zeros(0, bool), [], state
         invalid = np.zeros(n, bool) if invalid is None else invalid
         limits = np.array(self.serial.limits)
         start = np.array([state[0][j] for j in m.active_index])
@@ -145,13 +154,11 @@ class Batch:
         lam = np.clip(lam, 0.0, 1.0)[:, None]
         guess = knots_q[prv] + lam * (knots_q[nxt] - knots_q[prv])
         guess[:, m.primary_joints] = qa[:, m.primary]
-        poses = self.close(guess, qa)            # what does not close is re-solved below
-        positions = np.column_stack(np.broadcast_arrays(*poses.pose.q, np.zeros(n))[:-1])
-        basis = np.stack([np.column_stack(np.broadcast_arrays(*row, np.zeros(n))[:-1])
-                          for row in poses.basis], axis=1)          # (N, n_joints, dof)
-        ok = (np.broadcast_to(poses.pose.converged, (n,)) &
-              (poses.condition <= m.max_condition_number) &
-              (np.broadcast_to(poses.mismatch, (n,)) <= m.setpoint_tolerance) & ~invalid)
+        positions, flat, converged, mismatch = self.close(guess, qa, qd, qdd)
+        record = self.record(flat)
+        basis = self.basis(record)                        # (N, n_joints, dof)
+        ok = (converged & (record.condition <= m.max_condition_number) &
+              (mismatch <= m.setpoint_tolerance) & ~invalid)
         ok &= self.continues(state, qa, positions, basis)      # 3. the serial rules
         errors = [None] * n
         redone = self.resolve_serially(state, qa, positions, basis, ok, invalid, errors,
@@ -164,30 +171,65 @@ class Batch:
         else:
             positions[:] = state[0]
             new_state = state
-        if redone or not ok.all():
-            poses = pose_of(m, positions, poses.mismatch)
-        return poses, positions, ok, errors, new_state
+        changed = np.flatnonzero(redone | ~ok)
+        if changed.size:                           # 4. the record where the poses changed
+            flat[changed] = self.kernels.dynamics_many(positions[changed], qa[changed],
+                                                       qd[changed], qdd[changed])
+        return record, positions, ok, errors, new_state
 
-    def close(self, guess, qa):
+    def close(self, guess, qa, qd, qdd):
         """Newton on every sample at once from ``guess`` (N, n_joints), then for redundant
-        actuation the projection onto the setpoints ``qa``."""
+        actuation the projection onto the setpoints ``qa``. Returns (positions, flat
+        dynamics outputs there, converged (N,), redundant mismatch (N,))."""
         m = self.mechanism
-        target = columns(qa)
-        pose = closure.solve_closure(m.model, columns(guess), m.free_joints, sp.ArrayOps,
-                                     m.closure_tolerance, max_iter=NEWTON_ITERATIONS)
-        basis = velocity_basis(m, pose)
+        q, converged = self.newton(guess)
+        flat = self.kernels.dynamics_many(q, qa, qd, qdd)
         if not m.is_redundant:
-            return BatchPose(pose, basis, 0.0, pose.lsq.condition_number())
+            return q, flat, converged, np.zeros(len(q))
         for _ in range(PROJECTION_ITERATIONS):
-            dz = projection_increment(m, basis, pose.q, target, sp.ArrayOps)
-            if np.all(sp.ArrayOps.maxabs(dz) < PROJECTION_TOLERANCE):
+            record = self.record(flat)
+            dz = record.projection
+            if np.all(np.abs(dz).max(axis=1) < PROJECTION_TOLERANCE):
                 break
-            pose = closure.solve_closure(m.model, projected_pose(m, pose.q, basis, dz),
-                                         m.free_joints, sp.ArrayOps, m.closure_tolerance,
-                                         max_iter=NEWTON_ITERATIONS)
-            basis = velocity_basis(m, pose)
-        mismatch = sp.ArrayOps.maxabs([pose.q[j] - t for j, t in zip(m.active_index, target)])
-        return BatchPose(pose, basis, mismatch, pose.lsq.condition_number())
+            moved = q - np.einsum('njk,nk->nj', self.basis(record), dz)
+            moved[:, m.primary_joints] = q[:, m.primary_joints] - dz
+            q, converged = self.newton(moved)
+            flat = self.kernels.dynamics_many(q, qa, qd, qdd)
+        return q, flat, converged, np.abs(q[:, m.active_index] - qa).max(axis=1)
+
+    def newton(self, q):
+        """Newton's method on the loop equations of all samples at once, by the closure
+        kernel, until every sample is closed (a closed sample takes the steps the others
+        need too: they only make it more exact). Returns (positions, converged (N,))."""
+        free, kernels = self.mechanism.free_joints, self.kernels
+        q = np.array(q, dtype=float)
+        for iteration in range(NEWTON_ITERATIONS + 1):
+            record = unpack(kernels.closure_many(q), kernels.layouts['closure'], ClosureRecord)
+            converged = self.closed(record)
+            if converged.all() or iteration == NEWTON_ITERATIONS:
+                return q, converged
+            size = np.abs(record.increment).max(axis=1, initial=0.0)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                factor = np.where(size > NEWTON_MAX_INCREMENT, NEWTON_MAX_INCREMENT / size, 1.0)
+            factor = np.where(np.isfinite(factor), factor, 0.0)
+            q[:, free] -= record.increment * factor[:, None]
+
+    def closed(self, record):
+        """(N,) bool: the loops of each sample are closed (as SampleSolver.close decides)."""
+        return ((np.abs(record.residual).max(axis=1, initial=0.0) <
+                 self.mechanism.closure_tolerance) & (record.cosines > 0.0).all(axis=1))
+
+    def record(self, flat):
+        return unpack(flat, self.kernels.layouts['dynamics'], PoseRecord)
+
+    def basis(self, record):
+        """The velocity basis V of every sample, (N, n_joints, dof)."""
+        m = self.mechanism
+        basis = np.zeros((len(record.basis), len(m.joints), m.dof))
+        basis[:, m.free_joints] = record.basis
+        for k, j in enumerate(m.primary_joints):
+            basis[:, j, k] = 1.0
+        return basis
 
     def continues(self, start_state, qa, positions, basis):
         """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for
@@ -210,10 +252,11 @@ class Batch:
                          on_invalid):
         """Re-solve, in order, every sample not ``ok`` by serial continuation from the last
         good sample before it; a sample after one that changed is checked again. Updates
-        the arrays in place; returns True if any sample was re-solved."""
+        the arrays in place; returns the (N,) mask of the samples re-solved."""
         pending = [int(i) for i in np.flatnonzero(~ok)]
         heapq.heapify(pending)
-        last_good, last_done, redone = -1, -1, False
+        last_good, last_done = -1, -1
+        redone = np.zeros(len(ok), bool)
         while pending:
             i = heapq.heappop(pending)
             if i <= last_done:
@@ -239,7 +282,7 @@ class Batch:
                     raise
             else:
                 positions[i], basis[i] = solved, solved_basis
-                ok[i], redone, last_good = True, True, i
+                ok[i], redone[i], last_good = True, True, i
                 if np.max(np.abs(positions[i] - before)) <= 1e-9:
                     continue                    # the same pose: the samples after it stand
             if i + 1 < len(ok):

@@ -124,6 +124,7 @@ _C_PRELUDE = r"""/* Kernels of one mechanism, emitted by cog_id_ros.core.emitter
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <string.h>
 
 static PyObject *record_type[%(n_kernels)d];
 
@@ -222,6 +223,40 @@ static PyObject *record(int kind, PyObject *fields)
     return out;
 }
 
+/* the n_views buffers of a *_many call, checked: C-contiguous float64 of N rows of
+   width[k]; the last one writable. Returns N, or -1 with a Python error. */
+static Py_ssize_t many_buffers(PyObject *const *args, Py_ssize_t nargs, int n_views,
+                               const Py_ssize_t *width, Py_buffer *view, const char *name)
+{
+    if (nargs != n_views) {
+        PyErr_Format(PyExc_TypeError, "%%s() takes %%d arrays", name, n_views);
+        return -1;
+    }
+    Py_ssize_t n = -1;
+    for (int k = 0; k < n_views; k++) {
+        int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (k == n_views - 1 ? PyBUF_WRITABLE : 0);
+        if (PyObject_GetBuffer(args[k], &view[k], flags) < 0) {
+            for (int j = 0; j < k; j++)
+                PyBuffer_Release(&view[j]);
+            return -1;
+        }
+        Py_ssize_t rows = width[k] ? view[k].len / (Py_ssize_t)sizeof(double) / width[k] : 0;
+        if (view[k].itemsize != sizeof(double) || view[k].format == NULL ||
+                strcmp(view[k].format, "d") != 0 ||
+                (width[k] && rows * width[k] * (Py_ssize_t)sizeof(double) != view[k].len) ||
+                (width[k] && n >= 0 && rows != n)) {
+            PyErr_Format(PyExc_ValueError, "%%s: argument %%d must be a C-contiguous float64 "
+                         "array of shape (N, %%zd)", name, k + 1, width[k]);
+            for (int j = 0; j <= k; j++)
+                PyBuffer_Release(&view[j]);
+            return -1;
+        }
+        if (width[k])
+            n = rows;
+    }
+    return n < 0 ? 0 : n;
+}
+
 static PyObject *set_record_types(PyObject *self, PyObject *args)
 {
     for (int i = 0; i < %(n_kernels)d; i++) {
@@ -257,7 +292,9 @@ def _field_shape(value):
 
 def c_kernel_source(index, name, params, fields):
     """C source of one kernel ``name(*params)`` returning record type ``index``'s instance
-    of ``fields`` (as :func:`python_source`). Returns (source, number of operations)."""
+    of ``fields`` (as :func:`python_source`), and of ``name_many``, the same kernel over N
+    samples at once (see :func:`c_module_source`). Returns (source, number of operations,
+    number of outputs)."""
     outputs = [x for _, value in fields for x in leaves(value)]
     graph = next((o.graph for o in outputs if isinstance(o, Sym)), None) or \
         next((s.graph for _, syms in params for s in syms), None)
@@ -272,26 +309,35 @@ def c_kernel_source(index, name, params, fields):
     def operand(a):
         return names[a] if isinstance(a, int) else _c_literal(a)
 
-    lines = [f'static PyObject *kernel_{name}(PyObject *self, PyObject *const *args, '
-             f'Py_ssize_t nargs)', '{',
-             f'    if (nargs != {len(params)}) {{',
-             f'        PyErr_SetString(PyExc_TypeError, "{name}() takes {len(params)} '
-             f'arguments");',
-             '        return NULL;',
-             '    }']
-    for i, (p, syms) in enumerate(params):
-        shape = _field_shape(syms)
-        size = len(leaves(syms))
-        reader = (f'read_rows(args[{i}], {p}, {shape[1]}, {shape[2]}, "{p}")'
-                  if shape[0] == 'rows' else f'read_doubles(args[{i}], {p}, {size}, "{p}")')
-        lines += [f'    double {p}[{max(size, 1)}];',
-                  f'    if ({reader} < 0)',
-                  '        return NULL;']
+    sizes = [len(leaves(syms)) for _, syms in params]
+    n_out = len(outputs)
+    declared = ', '.join(f'const double *restrict {p}' for p, _ in params)
+    arguments = ', '.join(p for p, _ in params)
+    # the arithmetic, once
+    lines = [f'static void body_{name}({declared}, double *restrict out)', '{']
     for k in operations:
         op, args = graph.nodes[k]
         lines.append(f'    const double t{k} = {C_EXPRESSIONS[op].format(*map(operand, args))};')
-    values = ', '.join(operand(o.k if isinstance(o, Sym) else o) for o in outputs) or '0.0'
-    lines.append(f'    const double out[{max(len(outputs), 1)}] = {{{values}}};')
+    for i, o in enumerate(outputs):
+        lines.append(f'    out[{i}] = {operand(o.k if isinstance(o, Sym) else o)};')
+    lines += ['}', '']
+    # one sample: Python sequences in, a record out
+    lines += [f'static PyObject *kernel_{name}(PyObject *self, PyObject *const *args, '
+              f'Py_ssize_t nargs)', '{',
+              f'    if (nargs != {len(params)}) {{',
+              f'        PyErr_SetString(PyExc_TypeError, "{name}() takes {len(params)} '
+              f'arguments");',
+              '        return NULL;',
+              '    }']
+    for i, (p, syms) in enumerate(params):
+        shape = _field_shape(syms)
+        reader = (f'read_rows(args[{i}], {p}, {shape[1]}, {shape[2]}, "{p}")'
+                  if shape[0] == 'rows' else f'read_doubles(args[{i}], {p}, {sizes[i]}, "{p}")')
+        lines += [f'    double {p}[{max(sizes[i], 1)}];',
+                  f'    if ({reader} < 0)',
+                  '        return NULL;']
+    lines += [f'    double out[{max(n_out, 1)}];',
+              f'    body_{name}({arguments}, out);']
     built, offset = [], 0
     for field, value in fields:
         shape = _field_shape(value)
@@ -317,8 +363,28 @@ def c_kernel_source(index, name, params, fields):
               f'    for (int i = 0; i < {n}; i++)',
               '        PyTuple_SET_ITEM(fields, i, f[i]);',
               f'    return record({index}, fields);',
+              '}', '']
+    # N samples: C-contiguous float64 buffers (N, width) in, one (N, outputs) written
+    widths = ', '.join(str(w) for w in sizes + [n_out])
+    lines += [f'static PyObject *kernel_{name}_many(PyObject *self, PyObject *const *args, '
+              f'Py_ssize_t nargs)', '{',
+              f'    static const Py_ssize_t width[{len(params) + 1}] = {{{widths}}};',
+              f'    Py_buffer view[{len(params) + 1}];',
+              f'    Py_ssize_t n = many_buffers(args, nargs, {len(params) + 1}, width, view, '
+              f'"{name}_many");',
+              '    if (n < 0)',
+              '        return NULL;']
+    pointers = ', '.join(f'(const double *)view[{i}].buf + i * {w}'
+                         for i, w in enumerate(sizes))
+    lines += ['    Py_BEGIN_ALLOW_THREADS',
+              '    for (Py_ssize_t i = 0; i < n; i++)',
+              f'        body_{name}({pointers}, (double *)view[{len(params)}].buf + i * {n_out});',
+              '    Py_END_ALLOW_THREADS',
+              f'    for (int k = 0; k < {len(params) + 1}; k++)',
+              '        PyBuffer_Release(&view[k]);',
+              '    Py_RETURN_NONE;',
               '}']
-    return '\n'.join(lines) + '\n', len(operations)
+    return '\n'.join(lines) + '\n', len(operations), n_out
 
 
 def c_module_source(module, kernels):
@@ -326,16 +392,22 @@ def c_module_source(module, kernels):
 
     kernels: list of (name, params, record type name, fields) as for :func:`python_source`.
     The module's ``set_record_types(*types)`` must be called once, with the record types in
-    the order of ``kernels``, before a kernel is. Returns (source, {name: operations}).
+    the order of ``kernels``, before a kernel is. Each kernel ``name`` also comes as
+    ``name_many(*arrays, out)``: C-contiguous float64 arrays of shape (N, inputs of the
+    parameter) and a writable (N, outputs) array that receives the outputs of every sample
+    in the order of ``fields``, flattened. Returns (source, {name: operations}).
     """
     parts = [_C_PRELUDE % {'n_kernels': len(kernels)}]
     counts = {}
     for index, (name, params, _, fields) in enumerate(kernels):
-        source, counts[name] = c_kernel_source(index, name, params, fields)
+        source, counts[name], _ = c_kernel_source(index, name, params, fields)
         parts.append(source)
-    methods = [f'    {{"{name}", (PyCFunction)(void (*)(void))kernel_{name}, METH_FASTCALL, '
-               f'"{record} of the mechanism (see cog_id_ros.core.kernels)"}},'
-               for name, _, record, _ in kernels]
+    methods = [f'    {{"{name}{many}", (PyCFunction)(void (*)(void))kernel_{name}{many}, '
+               f'METH_FASTCALL, "{text}"}},'
+               for name, _, record, _ in kernels
+               for many, text in (('', f'{record} of the mechanism (cog_id_ros.core.kernels)'),
+                                  ('_many', f'{name} over N samples: (N, width) float64 '
+                                            f'arrays in, the (N, outputs) array written'))]
     parts.append('static PyMethodDef methods[] = {\n'
                  '    {"set_record_types", set_record_types, METH_VARARGS, NULL},\n'
                  + '\n'.join(methods) + '\n    {NULL, NULL, 0, NULL}\n};\n')

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import closure
 from . import spatial as sp
-from .batch import Batch, Evaluation, columns
+from .batch import Batch, Evaluation, columns, pose_of
 from .cog_jacobian import cog_drifts, cog_jacobians, cog_poses, cog_velocities
 from .errors import CogIdError, MechanismConfigError, SetpointError
 from .inputs import check_values, one_sample, out_of_range, setpoint_arrays
@@ -197,7 +197,8 @@ class InverseDynamics:
             return _Poses(np.array(state[0]), pose, state[1], qd[0].tolist(), sp.ScalarOps,
                           state, qd, single)
         with np.errstate(all='ignore'):
-            poses, positions, _, _, state = self._batch.positions(self._state, q, 'raise')
+            _, positions, _, _, state = self._batch.positions(self._state, q, 'raise')
+            poses = pose_of(m, positions)
         return _Poses(positions, poses.pose, poses.basis, columns(qd), sp.ArrayOps, state, qd,
                       single)
 

@@ -31,6 +31,8 @@ import os
 from typing import NamedTuple
 import weakref
 
+import numpy as np
+
 from . import closure, native
 from . import spatial as sp
 from .continuation import prediction
@@ -38,7 +40,7 @@ from .emitter import c_module_source, python_function
 from .errors import MechanismConfigError
 from .joint_motion import projection_increment, velocity_basis
 from .pipeline import inverse_dynamics
-from .straight_line import Graph, SymOps
+from .straight_line import Graph, SymOps, leaves
 
 BACKENDS = ('auto', 'reference', 'python', 'native')
 
@@ -98,12 +100,41 @@ def prediction_record(mechanism, q, basis, goal):
     return PredictionRecord(*prediction(mechanism, (q, basis), goal))
 
 
+def layouts(mechanism):
+    """Per kernel, its record's fields and their shapes: () a number, (k,) k numbers,
+    (rows, k) rows of k numbers. The order of the flat outputs of the *_many kernels."""
+    m = mechanism
+    n, n_free, dof, n_act = len(m.joints), len(m.free_joints), m.dof, len(m.active_joints)
+    n_loops = len(m.model.loops)
+    closing = [('residual', (6 * n_loops,)), ('cosines', (n_loops,)), ('increment', (n_free,))]
+    return {'prediction': [('predicted', (n,)), ('moved', (n,))],
+            'closure': closing,
+            'dynamics': closing + [('condition', ()), ('torques', (n_act,)),
+                                   ('basis', (n_free, dof)),
+                                   ('projection', (dof,) if m.is_redundant else (0,))]}
+
+
+def unpack(flat, layout, record):
+    """The record of N samples from their flat outputs (N, outputs): each field an array of
+    shape (N,) + its shape (views, no copies)."""
+    fields, offset = [], 0
+    for _, shape in layout:
+        size = int(np.prod(shape)) if shape else 1
+        block = flat[:, offset:offset + size]
+        fields.append(block[:, 0] if not shape else block.reshape((len(flat),) + shape))
+        offset += size
+    return record(*fields)
+
+
 class ReferenceKernels:
-    """The kernels as lane code on Python floats."""
+    """The kernels as lane code: on Python floats for one sample, on numpy arrays of shape
+    (N,) for N samples (the *_many kernels, which return flat (N, outputs) arrays in the
+    order of :func:`layouts`)."""
     name = 'reference'
 
     def __init__(self, mechanism):
         self.mechanism = mechanism
+        self.layouts = layouts(mechanism)
 
     def prediction(self, q, basis, goal):
         return prediction_record(self.mechanism, q, basis, goal)
@@ -113,6 +144,24 @@ class ReferenceKernels:
 
     def dynamics(self, q, target, qd, qdd):
         return pose_record(self.mechanism, q, target, qd, qdd, sp.ScalarOps)
+
+    def closure_many(self, q):
+        return _flat(closure_record(self.mechanism, _lanes(q), sp.ArrayOps)[1], len(q))
+
+    def dynamics_many(self, q, target, qd, qdd):
+        return _flat(pose_record(self.mechanism, *map(_lanes, (q, target, qd, qdd)),
+                                 sp.ArrayOps), len(q))
+
+
+def _lanes(array):
+    return [array[:, k] for k in range(array.shape[1])]
+
+
+def _flat(record, n):
+    values = leaves(list(record))
+    if not values:
+        return np.zeros((n, 0))
+    return np.column_stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in values])
 
 
 def trace(mechanism):
@@ -135,13 +184,13 @@ def trace(mechanism):
              list(zip(PoseRecord._fields, whole)))]
 
 
-class PythonKernels:
+class PythonKernels(ReferenceKernels):
     """The kernels traced into straight-line Python functions (``source`` keeps their text,
-    ``operations`` their sizes)."""
+    ``operations`` their sizes); N samples run the lane code on arrays (reference)."""
     name = 'python'
 
     def __init__(self, mechanism, traced=None):
-        self.mechanism = mechanism
+        super().__init__(mechanism)
         self.source, self.operations = {}, {}
         for name, params, record, fields in traced or trace(mechanism):
             function, self.source[name], self.operations[name] = python_function(
@@ -149,20 +198,36 @@ class PythonKernels:
             setattr(self, name, function)
 
 
-class NativeKernels:
+class NativeKernels(ReferenceKernels):
     """The kernels compiled from C (native.py): a library per mechanism, cached on disk by a
     hash of the mechanism's parameters and of this package's core, so a cached mechanism
-    loads without tracing. Raises native.NativeUnavailable when they cannot be had."""
+    loads without tracing. N samples run the same C in a loop. Raises
+    native.NativeUnavailable when they cannot be had."""
     name = 'native'
 
     def __init__(self, mechanism):
-        self.mechanism = mechanism
+        super().__init__(mechanism)
         self.traced = None
         key = repr(sorted(mechanism.parameters.items())) + core_version()
         module, self.operations = native.load_module(key, self._source)
         module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
         self.prediction = module.prediction
         self.closure, self.dynamics = module.closure, module.dynamics
+        self.module = module
+        self.widths = {name: sum(int(np.prod(shape)) if shape else 1 for _, shape in layout)
+                       for name, layout in self.layouts.items()}
+
+    def closure_many(self, q):
+        return self._many('closure', q)
+
+    def dynamics_many(self, q, target, qd, qdd):
+        return self._many('dynamics', q, target, qd, qdd)
+
+    def _many(self, name, *arrays):
+        arrays = [np.ascontiguousarray(a, dtype=float) for a in arrays]
+        out = np.empty((len(arrays[0]), self.widths[name]))
+        getattr(self.module, name + '_many')(*arrays, out)
+        return out
 
     def _source(self, module):
         """(C source of the module, operations per kernel); traces on first use."""
