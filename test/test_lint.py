@@ -17,7 +17,7 @@ def ruff_command():
     found = shutil.which('ruff')
     if found:
         return [found]
-    pytest.skip('ruff is not installed (requirements.txt pins it; ./dev setup installs it)')
+    pytest.fail('ruff is not installed (requirements.txt pins it; ./dev setup installs it)')
 
 
 def test_ruff_finds_nothing():

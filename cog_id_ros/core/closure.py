@@ -1,4 +1,5 @@
-"""Loop closure: the constraint equations, their Jacobian and Newton's method on them.
+"""Loop closure: the constraint equations and their Jacobian (Newton's method on them is in
+sample_solve.py and batch.py).
 
 For every loop-closing joint c between links P and C, the child attachment frame of C must
 coincide with the parent attachment frame of P moved by the joint motion M(q_c). Six
@@ -104,38 +105,6 @@ def _closed(sol, tol):
     for st in sol.loops:
         ok = ok & (st.cosine > 0.0)
     return ok
-
-
-def solve_closure(model, q, free, ops, tol, max_iter=30, max_step=0.5):
-    """Newton's method (Gauss-Newton where the equations are redundant) on the closure
-    equations over the coordinates ``free``, from ``q``; the others stay fixed.
-
-    Steps are least-squares solutions from QR and limited to ``max_step`` (rad or m) in
-    every coordinate, which keeps a poor start from jumping to another assembly branch.
-    """
-    q = list(q)
-    scalar = ops.maxabs is sp.ScalarOps.maxabs
-    for iteration in range(max_iter + 1):
-        sol = evaluate(model, q, free, ops)
-        converged = _closed(sol, tol)
-        if iteration == max_iter or (converged if scalar else bool(np.all(converged))):
-            break
-        residual = [r for st in sol.loops for r in st.residual]
-        step = sol.lsq.solve(residual)
-        size = ops.maxabs(step)
-        if scalar:
-            if size != size or size < 1e-15 * (1.0 + ops.maxabs([q[j] for j in free])):
-                break                           # NaN, or stagnated: no reachable closure
-            factor = min(1.0, max_step / size) if size > 0 else 1.0
-        else:
-            with np.errstate(divide='ignore', invalid='ignore'):
-                factor = np.where(size > max_step, max_step / size, 1.0)
-            factor = np.where(np.isfinite(factor), factor, 0.0)
-        for k, j in enumerate(free):
-            q[j] = q[j] - step[k] * factor
-    sol.converged = converged
-    sol.iterations = iteration
-    return sol
 
 
 def closure_jacobian_matrix(model, q):

@@ -19,7 +19,8 @@ REASONS = {
 class CogIdError(Exception):
     """Base class of every error raised by cog_id_ros."""
 
-    #: key of REASONS (None for errors that are not about a sample, e.g. configuration)
+    #: a key of REASONS for errors about a sample; 'config' for MechanismConfigError (a
+    #: parameter, not a sample); None otherwise
     reason = None
 
 

@@ -39,6 +39,7 @@ def setpoint_arrays(mechanism, q, qd, qdd):
         out.append(array.reshape(1, -1) if single else array)
     return out[0], out[1], out[2], single
 
+
 def one_sample(mechanism, wrapping, q, qd, qdd):
     """(q, qd, qdd) as lists of floats when they are one well-formed sample in range,
     else None (the general path then reports what is wrong)."""
@@ -76,12 +77,12 @@ def one_sample(mechanism, wrapping, q, qd, qdd):
         return None
     return out
 
+
 def check_values(mechanism, wrapping, q, qd, qdd, single):
     """SetpointError for the first non-finite entry, or revolute position beyond
     MAX_ANGLE; returns (per-sample bool array, {sample: error})."""
     finite = (np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) &
               np.isfinite(qdd).all(axis=1))
-    wrapping = wrapping
     in_range = (np.abs(q[:, wrapping]) <= MAX_ANGLE).all(axis=1) if wrapping else finite
     errors = {}
     for i in np.flatnonzero(~(finite & in_range)):
@@ -101,11 +102,6 @@ def check_values(mechanism, wrapping, q, qd, qdd, single):
                 f'+-{MAX_ANGLE:g} rad (there a float no longer holds an angle to better than '
                 f'1e-7 rad): wrap or offset the angle', sample=int(i), reason='out_of_range')
     return finite & in_range, errors
-
-
-def floats(value):
-    """True for a list of Python floats (what a control loop passes at control rate)."""
-    return type(value) is list and all(type(x) is float for x in value)
 
 
 def float_array(label, value, m):

@@ -17,7 +17,7 @@ from .batch import Batch, Evaluation, columns, pose_of
 from .cog_jacobian import cog_drifts, cog_jacobians, cog_poses, cog_velocities
 from .errors import CogIdError, MechanismConfigError, SetpointError
 from .inputs import check_values, one_sample, out_of_range, setpoint_arrays
-from .joint_motion import active_velocity_map, velocity_basis
+from .joint_motion import active_velocity_map
 from .kernels import kernels_for
 from .mechanism import Mechanism
 from .pipeline import drift_accelerations, equation_of_motion
@@ -47,17 +47,23 @@ class InverseDynamics:
                              f'or from_parameters), got {type(mechanism).__name__}')
         self.mechanism = mechanism
         kernels = kernels_for(mechanism, backend)
-        self.backend = kernels.name
+        self._backend = kernels.name
         self._serial = SampleSolver(mechanism, kernels, self.continuation_step)
         self._batch = Batch(mechanism, self._serial)
         self.reset()
 
+    @property
+    def backend(self) -> str:
+        """The kernels this solver uses: 'native', 'python' or 'reference'."""
+        return self._backend
+
     def reset(self) -> None:
         """Forget the previous calls: the next one starts from the assembled initial_positions."""
         m = self.mechanism
-        pose = closure.solve_closure(m.model, list(m.assembled_positions), m.free_joints,
-                                     sp.ScalarOps, m.closure_tolerance)
-        self._state = (pose.q, velocity_basis(m, pose))
+        start = list(m.assembled_positions)
+        q, record, _, _ = self._serial.close(start, [start[j] for j in m.active_index],
+                                             self._serial.zeros, self._serial.zeros)
+        self._state = (list(q), self._serial.basis(record))
 
     def torques(self, q: ArrayLike, qd: Optional[ArrayLike] = None,
                 qdd: Optional[ArrayLike] = None) -> np.ndarray:
@@ -136,15 +142,17 @@ class InverseDynamics:
         angular acceleration when thetaddot = 0."""
         at = self._poses(q, qd)
         s, jac, cogs = self._cog_jacobians(at)
-        drifts = cog_drifts(cogs, cog_velocities(jac, at.rates),
-                            drift_accelerations(self.mechanism, at.pose, s, at.rates))
+        with np.errstate(all='ignore'):          # overflow is reported by _moved_to
+            drifts = cog_drifts(cogs, cog_velocities(jac, at.rates),
+                                drift_accelerations(self.mechanism, at.pose, s, at.rates))
         return self._moved_to(at, _stack([list(a) + list(alpha) for a, alpha in drifts]))
 
     def equation_of_motion(self, q: ArrayLike, qd: Optional[ArrayLike] = None
                            ) -> Tuple[np.ndarray, np.ndarray]:
         """H (M, M) and B (M,) of eq. (7), tau = H qdd + B; batch: (N, M, M), (N, M)."""
         at = self._poses(q, qd)
-        h, b = equation_of_motion(self.mechanism, at.pose, at.basis, at.rates, at.ops)
+        with np.errstate(all='ignore'):          # overflow is reported by _moved_to
+            h, b = equation_of_motion(self.mechanism, at.pose, at.basis, at.rates, at.ops)
         return self._moved_to(at, _stack(h), keep=True), self._moved_to(at, _stack(b))
 
     # --- helpers ------------------------------------------------------------------------

@@ -277,8 +277,8 @@ def kernels_for(mechanism, backend='auto'):
             except native.NativeUnavailable as exc:
                 if backend == 'native':
                     raise MechanismConfigError(
-                        'backend', f"'native' needs compiled kernels, and {exc}; use 'auto' "
-                                   f"or 'python'") from None
+                        'backend', f"'native' needs compiled kernels, and {exc}; use 'auto', "
+                                   f"'python' or 'reference'") from None
                 if not _warned_native:
                     _log.warning('cog_id_ros: compiled kernels unavailable (%s): using the '
                                  "Python kernels (backend='python')", exc)

@@ -111,4 +111,3 @@ def solve_spd(a, rhs, ops):
                 s = s - lower[k][i] * out[k][c]
             out[i][c] = s * ops.recip(lower[i][i])
     return out
-

@@ -101,6 +101,16 @@ class Mechanism:
                 'mechanism.initial_positions',
                 f'the mechanism could not be analysed at these positions ({exc}); check the '
                 f'geometry and initial_positions') from None
+        # what the kernels are made of stays what it was read as: read-only from here on
+        self._frozen = True
+
+    def __setattr__(self, name, value):
+        if getattr(self, '_frozen', False):
+            raise AttributeError(
+                f'Mechanism.{name} is read-only: solvers and their compiled kernels are made '
+                f'from the mechanism as it was read. Change the parameters and build a new '
+                f'one with Mechanism.from_parameters')
+        object.__setattr__(self, name, value)
 
     @classmethod
     def from_parameters(cls, params: dict) -> 'Mechanism':
@@ -116,7 +126,8 @@ class Mechanism:
         """From a ROS 2 parameter file (node entry ``node_name`` or ``/**``).
 
         The file is read by :mod:`cog_id_ros.params_file` (the ROS conventions live outside
-        the core); ``node_name`` defaults to its ``DEFAULT_NODE_NAME``."""
+        the core); ``node_name`` is the node's name, ``cog_id_node`` (a test checks it is
+        params_file.DEFAULT_NODE_NAME)."""
         from ..params_file import load_params_file
         return cls(load_params_file(path, node_name))
 

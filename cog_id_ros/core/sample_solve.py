@@ -131,7 +131,7 @@ class SampleSolver:
         m = self.mechanism
         q, record, iterations, ok = self.close(predicted, goal, qd, qdd)
         if not ok:
-            raise not_closed(m, record, self.tolerance, iterations, sample)
+            raise not_closed(record, self.tolerance, iterations, sample)
         closed = q
         if final and self.redundant:
             q, record = self.project(q, record, goal, qd, qdd, sample)
@@ -160,7 +160,7 @@ class SampleSolver:
                 break
             increment = record.increment
             size = max(map(abs, increment))
-            if not size < math.inf or size < 1e-15 * (1.0 + max([abs(q[j]) for j in free])):
+            if not size < math.inf or size < 1e-15 * (1.0 + max(abs(q[j]) for j in free)):
                 break                               # NaN or infinite, or stagnated
             factor = min(1.0, NEWTON_MAX_INCREMENT / size)
             q = list(q)
@@ -184,7 +184,7 @@ class SampleSolver:
                 projected_pose(m, q, self.basis(record), dz), target, qd, qdd,
                 likely_closed=True)
             if not ok:
-                raise not_closed(m, record, self.tolerance, iterations, sample)
+                raise not_closed(record, self.tolerance, iterations, sample)
         mismatch = max(abs(q[j] - t) for j, t in zip(m.active_index, target))
         if mismatch > m.setpoint_tolerance:
             raise ClosureError(
@@ -211,7 +211,7 @@ def _fmt(values):
     return '[' + ', '.join(f'{v:.6g}' for v in values) + ']'
 
 
-def not_closed(mechanism, record, tolerance, iterations, sample):
+def not_closed(record, tolerance, iterations, sample):
     residual = max(map(abs, record.residual))
     return ClosureError(
         f'{_where(sample)}the loops cannot be closed at this setpoint: closure residual '

@@ -271,3 +271,26 @@ def test_sample_torques_reports_bad_input_like_torques_and_keeps_the_warm_start(
         solver.sample_torques([0.0], [0.0], [0.0])
     assert solver.sample_torques([1.52], [0.1], [0.0]) == twin.sample_torques([1.52], [0.1], [0.0])
     assert solver.sample_torques([1.5], None, None) == solver.torques([1.5]).tolist()
+
+
+def test_a_mechanism_is_read_only_so_every_backend_computes_the_same_one():
+    """Review of issue 10: setting gravity after a solver was made left the traced kernels
+    on the old value while the reference followed the new one."""
+    mechanism = cog_id_ros.Mechanism.from_params_file('config/paper_four_bar_a.yaml')
+    with pytest.raises(AttributeError, match='gravity is read-only.*from_parameters'):
+        mechanism.gravity = (0.0, 0.0, 0.0)
+    assert mechanism.gravity == MECHANISMS['paper_four_bar_a.yaml'].gravity
+
+
+def test_batch_eq7_overflows_as_a_setpoint_error_without_numpy_warnings():
+    """Review of issue 10: equation_of_motion and cog_drifts on a batch leaked numpy's
+    overflow RuntimeWarning (an exception under -W error) instead of out_of_range."""
+    import warnings
+    solver = cog_id_ros.InverseDynamics(MECHANISMS['paper_four_bar_a.yaml'])
+    q = np.linspace(1.5, 1.7, 40)[:, None]
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        for call in (solver.equation_of_motion, solver.cog_drifts):
+            with pytest.raises(cog_id_ros.SetpointError) as info:
+                call(q, np.full((40, 1), 1e200))
+            assert info.value.reason == 'out_of_range'

@@ -204,4 +204,3 @@ def test_the_spanning_tree_is_built_in_linear_time_and_memory():
     assert m2 / m1 < 2.6, (m1, m2)
     t1, t2 = _tree_seconds([2000, 4000])
     assert t2 / t1 < 3.5, (t1, t2)     # quadratic: about 4 to 6
-

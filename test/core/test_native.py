@@ -9,12 +9,12 @@ import os
 import shutil
 import time
 
+from mechanisms import from_yaml
 import numpy as np
 import pytest
 
 import cog_id_ros
 from cog_id_ros.core import kernels, native
-from mechanisms import from_yaml
 
 pytestmark = pytest.mark.skipif(native.compiler() is None, reason='no C compiler here')
 

@@ -123,7 +123,6 @@ def test_rejects_what_it_cannot_differentiate():
         d.derivative(np.arange(5.0), np.zeros(6), 1)
 
 
-
 @pytest.mark.parametrize('unit', [1e-300, 1e300 / 64])
 def test_any_time_unit_without_overflow_or_warnings(unit):
     """Reliability item 20: steps of 1e-300 s or times of 1e300 s gave NaN and RuntimeWarnings.
