@@ -135,3 +135,134 @@ def _sample(name, n):
 def sample(name, n=200):
     """(t, q, qd, qdd) of config ``name`` on n evenly spaced times in [0, T_END] (read-only)."""
     return _sample(name, int(n))
+
+
+# --------------------------------------------------------------------------- parallel robots
+# The Stewart-Gough platform and the delta robot are driven through their platform: a smooth
+# platform motion, and the actuator coordinates from inverse kinematics with exact first and
+# second derivatives (so qd, qdd are those of q to rounding). The geometry is read from the
+# config file (joint names as written by bench/mechanism_family.py); the home pose (t = 0) is
+# the one the file's initial_positions were computed for.
+
+STEWART = 'stewart_6ups.yaml'
+DELTA = 'delta_3rus.yaml'
+STEWART_HOME_HEIGHT = 0.85      # m: platform frame origin above the base centre at t = 0
+DELTA_HOME_HEIGHT = 0.70        # m: platform frame origin below the base centre at t = 0
+
+# platform translation (m) and roll-pitch-yaw (rad), t in [0, 2] s
+STEWART_LAWS = (_law(0.0, 0.0, [(0.04, 0.0, PI)]),
+                _law(0.0, 0.0, [(0.0, 0.03, PI)]),
+                _law(STEWART_HOME_HEIGHT, 0.0, [(0.05, 0.0, 2 * PI)]),
+                _law(0.0, 0.0, [(0.08, 0.0, PI)]),
+                _law(0.0, 0.0, [(0.0, 0.06, PI)]),
+                _law(0.0, 0.0, [(0.10, 0.0, 2 * PI)]))
+DELTA_LAWS = (_law(0.0, 0.0, [(0.08, 0.0, 2 * PI)]),
+              _law(0.0, 0.0, [(0.0, 0.06, PI)]),
+              _law(-DELTA_HOME_HEIGHT, 0.0, [(0.05, 0.0, 2 * PI)]))
+
+
+@functools.lru_cache(maxsize=None)
+def _joint_params(name):
+    with open(config_path(name), encoding='utf-8') as f:
+        return yaml.safe_load(f)['/**']['ros__parameters']['joints']
+
+
+def _axis_rotation(k, a, ad, add):
+    """R = exp([e_k] a), Rd, Rdd for arrays of angles, rates, accelerations: (N, 3, 3)."""
+    kx = np.zeros((3, 3))
+    i, j = [(1, 2), (2, 0), (0, 1)][k]
+    kx[i, j], kx[j, i] = -1.0, 1.0
+    c, s = np.cos(a)[:, None, None], np.sin(a)[:, None, None]
+    r = np.eye(3) + s * kx + (1.0 - c) * (kx @ kx)
+    rd = r @ kx * ad[:, None, None]
+    rdd = r @ (kx * add[:, None, None] + kx @ kx * (ad * ad)[:, None, None])
+    return r, rd, rdd
+
+
+def stewart_platform_motion(t):
+    """Platform position p (N, 3) and rotation R = Rz(yaw) Ry(pitch) Rx(roll) (N, 3, 3), with
+    their first and second time derivatives: (p, pd, pdd, R, Rd, Rdd)."""
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    laws = [f(t) for f in STEWART_LAWS]
+    p, pd, pdd = (np.stack([laws[i][k] for i in range(3)], axis=1) for k in range(3))
+    a = _axis_rotation(2, *laws[5])     # yaw
+    b = _axis_rotation(1, *laws[4])     # pitch
+    c = _axis_rotation(0, *laws[3])     # roll
+    r = a[0] @ b[0] @ c[0]
+    rd = a[1] @ b[0] @ c[0] + a[0] @ b[1] @ c[0] + a[0] @ b[0] @ c[1]
+    rdd = (a[2] @ b[0] @ c[0] + a[0] @ b[2] @ c[0] + a[0] @ b[0] @ c[2]
+           + 2.0 * (a[1] @ b[1] @ c[0] + a[1] @ b[0] @ c[1] + a[0] @ b[1] @ c[1]))
+    return p, pd, pdd, r, rd, rdd
+
+
+def _stewart(t):
+    """Leg extensions (prismatic coordinates) of the Stewart platform along its platform
+    motion: L = |p + R c_i - b_i| minus the fixed part of the leg, exact derivatives."""
+    joints = _joint_params(STEWART)
+    p, pd, pdd, r, rd, rdd = stewart_platform_motion(t)
+    out = [[], [], []]
+    for leg in active_joints(STEWART):
+        i = leg[:-2]                                   # 'l3_p' -> 'l3'
+        b = np.asarray(joints[f'{i}_u1']['parent_xyz'], dtype=float)
+        c = np.asarray(joints[f'{i}_s3']['child_xyz'], dtype=float)
+        offset = joints[leg]['parent_xyz'][2] - joints[leg]['child_xyz'][2]
+        u, ud, udd = p + r @ c - b, pd + rd @ c, pdd + rdd @ c
+        length = np.linalg.norm(u, axis=1)
+        ld = np.einsum('ij,ij->i', u, ud) / length
+        ldd = (np.einsum('ij,ij->i', ud, ud) + np.einsum('ij,ij->i', u, udd) - ld * ld) / length
+        for k, x in enumerate((length - offset, ld, ldd)):
+            out[k].append(x)
+    return tuple(np.stack(x, axis=1) for x in out)
+
+
+def delta_platform_motion(t):
+    """Platform position (N, 3) of the delta robot, with its derivatives (p, pd, pdd)."""
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    laws = [f(t) for f in DELTA_LAWS]
+    return tuple(np.stack([laws[i][k] for i in range(3)], axis=1) for k in range(3))
+
+
+def _delta(t):
+    """Arm angles of the delta robot along its platform motion: closed-form delta IK (elbow
+    out), derivatives by differentiating |E(theta) - C(p)|^2 = rod^2 twice."""
+    joints = _joint_params(DELTA)
+    p, pd, pdd = delta_platform_motion(t)
+    out = [[], [], []]
+    for arm in active_joints(DELTA):
+        i = arm.split('_')[0][1:]                      # 'l2_arm_joint' -> '2'
+        pivot = np.asarray(joints[arm]['parent_xyz'], dtype=float)
+        phi = joints[arm]['parent_rpy'][2]
+        la = joints[f'r{i}a_u1']['parent_xyz'][0]
+        rod = joints[f'r{i}a_s1']['parent_xyz'][2]
+        cp, sp = np.cos(phi), np.sin(phi)
+        to_leg = np.array([[cp, sp, 0.0], [-sp, cp, 0.0], [0.0, 0.0, 1.0]])
+        rb = float(to_leg[0] @ pivot)
+        rp = float(to_leg[0] @ np.asarray(joints[f'r{i}a_s3']['child_xyz'], dtype=float))
+        x, xd, xdd = p @ to_leg.T, pd @ to_leg.T, pdd @ to_leg.T
+        a = rb - rp - x[:, 0]
+        kk = rod ** 2 - a * a - la ** 2 - x[:, 1] ** 2 - x[:, 2] ** 2
+        th = np.arctan2(x[:, 2], a) + np.arccos(kk / (2.0 * la * np.hypot(a, x[:, 2])))
+        c, s = np.cos(th), np.sin(th)
+        zero = 0.0 * th
+        g = np.stack([rb + la * c, zero, -la * s], axis=1) - (x + np.array([rp, 0.0, 0.0]))
+        e1 = np.stack([-la * s, zero, -la * c], axis=1)
+        e2 = np.stack([-la * c, zero, la * s], axis=1)
+        dot = lambda u, v: np.einsum('ij,ij->i', u, v)  # noqa: E731
+        ge1 = dot(g, e1)
+        thd = dot(g, xd) / ge1
+        w = e1 * thd[:, None] - xd
+        thdd = (dot(g, xdd) - dot(g, e2) * thd * thd - dot(w, w)) / ge1
+        for k, v in enumerate((th, thd, thdd)):
+            out[k].append(v)
+    return tuple(np.stack(v, axis=1) for v in out)
+
+
+def _platform_driven(name, f):
+    def traj(t):
+        return f(np.atleast_1d(np.asarray(t, dtype=float)))
+    traj.__name__ = 'trajectory_' + name.replace('.yaml', '')
+    return traj
+
+
+TRAJECTORIES[STEWART] = _platform_driven(STEWART, _stewart)
+TRAJECTORIES[DELTA] = _platform_driven(DELTA, _delta)
