@@ -4,11 +4,11 @@
 
 For each mechanism: the median time of one single-sample call (successive setpoints along a
 smooth motion at 1 kHz, as a control loop would call it) and the throughput of one call on
-10,000 samples. The single-sample time is measured for ``backend='python'`` (traced
-straight-line kernels, what 'auto' picks) and, in alternating blocks of 500 setpoints on a
-second solver, for ``backend='reference'`` (the lane code on floats). Redundantly actuated
-mechanisms (paper_four_bar_b, five_bar_redundant) run through the same kernels; the last
-column is each mechanism's single-sample time over paper_four_bar_a's.
+10,000 samples. The single-sample time is measured for each backend ('native' where a C
+compiler is there, 'python', 'reference'), in alternating blocks of 500 setpoints, on one
+solver each; the batch with the first. Redundantly actuated mechanisms (paper_four_bar_b,
+five_bar_redundant) run through the same kernels; the last column is each mechanism's
+single-sample time over paper_four_bar_a's (first backend).
 Targets (2-core machine): four-bar single sample < 50 us, batch > 200,000 samples/s,
 redundant mechanisms within 2x of paper_four_bar_a.
 """
@@ -41,44 +41,50 @@ def motion(mech, n, duration):
     return q, qd, np.gradient(qd, t, axis=0)
 
 
-def bench(path, repeats=5):
+def bench(path, backends, repeats=5):
+    """Median single-sample time per backend (interleaved blocks of 500 setpoints), and the
+    batch rate of the first backend."""
     mech = cog_id_ros.Mechanism.from_params_file(path)
     q, qd, qdd = motion(mech, 10_000, 10.0)      # 1 kHz
-    solver = cog_id_ros.InverseDynamics(mech, backend='python')
-    general = cog_id_ros.InverseDynamics(mech, backend='reference')
-    samples, general_samples = [], []
-    for block in range(6):          # alternate blocks of 500 setpoints between the two paths
-        for i in range(500 * block, 500 * (block + 1)):
-            t0 = time.perf_counter()
-            solver.torques(q[i], qd[i], qdd[i])
-            samples.append(time.perf_counter() - t0)
-        for i in range(500 * block, 500 * (block + 1)):
-            t0 = time.perf_counter()
-            general.torques(q[i], qd[i], qdd[i])
-            general_samples.append(time.perf_counter() - t0)
-    single = statistics.median(samples[100:]), statistics.median(general_samples[100:])
+    solvers = {b: cog_id_ros.InverseDynamics(mech, backend=b) for b in backends}
+    samples = {b: [] for b in backends}
+    for block in range(6):          # alternate blocks of 500 setpoints between the backends
+        for b, solver in solvers.items():
+            for i in range(500 * block, 500 * (block + 1)):
+                t0 = time.perf_counter()
+                solver.torques(q[i], qd[i], qdd[i])
+                samples[b].append(time.perf_counter() - t0)
+    single = {b: statistics.median(times[100:]) for b, times in samples.items()}
     rates = []
+    first = solvers[backends[0]]
     for _ in range(repeats):
-        solver.reset()
+        first.reset()
         t0 = time.perf_counter()
-        solver.torques(q, qd, qdd)
+        first.torques(q, qd, qdd)
         rates.append(len(q) / (time.perf_counter() - t0))
     return mech, single, statistics.median(rates)
 
 
 def main():
     names = [n for n in ('paper_four_bar_a', 'paper_four_bar_b', 'slider_crank', 'five_bar',
-                         'five_bar_redundant', 'spatial_rsur') if os.path.exists(os.path.join(ROOT, 'config', n + '.yaml'))]
-    print('command: ./dev bench   (bench/bench_core.py)')
-    print(f"{'mechanism':22s} {'joints':>6} {'DOF':>4} {'M':>3} {'python [us]':>12} "
-          f"{'reference [us]':>15} {'ratio':>6} {'batch [samples/s]':>18} {'vs (a)':>7}")
+                         'five_bar_redundant', 'spatial_rsur', 'stewart_6ups', 'delta_3rus')
+             if os.path.exists(os.path.join(ROOT, 'config', n + '.yaml'))]
+    probe = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_params_file(
+        os.path.join(ROOT, 'config', names[0] + '.yaml')))
+    backends = ['native', 'python', 'reference'] if probe.backend == 'native' else \
+        ['python', 'reference']
+    print('command: ./dev bench   (bench/bench_core.py); one sample [us] per backend, '
+          f'batch of 10,000 with {backends[0]}')
+    print(f"{'mechanism':22s} {'joints':>6} {'DOF':>4} {'M':>3} " +
+          ' '.join(f'{b:>10s}' for b in backends) +
+          f" {'batch [samples/s]':>18} {'vs (a)':>7}")
     first = None
     for name in names:
-        mech, (single, general), rate = bench(os.path.join(ROOT, 'config', name + '.yaml'))
-        first = first or single
-        print(f'{name:22s} {len(mech.joints):6d} {mech.dof:4d} {len(mech.active_joints):3d} '
-              f'{single * 1e6:12.1f} {general * 1e6:15.1f} {general / single:6.1f} {rate:18,.0f} '
-              f'{single / first:7.2f}', flush=True)
+        mech, single, rate = bench(os.path.join(ROOT, 'config', name + '.yaml'), backends)
+        first = first or single[backends[0]]
+        print(f'{name:22s} {len(mech.joints):6d} {mech.dof:4d} {len(mech.active_joints):3d} ' +
+              ' '.join(f'{single[b] * 1e6:10.1f}' for b in backends) +
+              f' {rate:18,.0f} {single[backends[0]] / first:7.2f}', flush=True)
 
 
 if __name__ == '__main__':

@@ -226,6 +226,11 @@ def build_parser():
                              "equivalent nearest the previous row's (for encoders of continuous "
                              'joints that report angles in (-pi, pi]); prismatic columns are '
                              'untouched; the summary says how many rows were shifted')
+    parser.add_argument('--backend', choices=('auto', 'native', 'python', 'reference'),
+                        default='auto',
+                        help='who computes the kernels: auto (compiled C where a C compiler '
+                             'is there, else Python), native, python (never compile), '
+                             'reference (the plain lane code, slow); default auto')
     parser.add_argument('--max-step', type=_positive_float, default=DEFAULT_MAX_STEP,
                         metavar='RAD',
                         help='largest change of a revolute active position from one row to the '
@@ -413,7 +418,7 @@ def _load_mechanism(args):
             mech = cog_id_ros.Mechanism.from_params_file(args.params_file)
         else:
             mech = cog_id_ros.Mechanism.from_params_file(args.params_file, args.node_name)
-        return mech, cog_id_ros.InverseDynamics(mech)
+        return mech, cog_id_ros.InverseDynamics(mech, backend=args.backend)
     except cog_id_ros.CogIdError as exc:
         raise ToolError(f'{args.params_file}: {_one_line(exc)}', EXIT_PARAMS) from None
     except OSError as exc:

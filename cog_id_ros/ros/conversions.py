@@ -334,7 +334,7 @@ def trajectory_process(conn, config):
     """Main function of the node's trajectory process (``multiprocessing``, spawn).
 
     ``config``: ``mechanism`` (the mechanism's parameters), ``active_joints``, ``unwrap``,
-    ``max_step``, ``effort_limits`` (or None), ``max_points``. Reads serialized
+    ``max_step``, ``effort_limits`` (or None), ``max_points``, ``backend``. Reads serialized
     JointTrajectory messages from ``conn`` until EOF (the node closed its end, or ended)
     and answers each with ('ok', serialized effort_trajectory, clipped, points),
     ('rejected', reason, text, points) or ('internal', text). Ignores SIGINT: Ctrl-C in a
@@ -343,7 +343,8 @@ def trajectory_process(conn, config):
     import signal
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     from ..core import InverseDynamics, Mechanism
-    solver = InverseDynamics(Mechanism.from_parameters(config['mechanism']))
+    solver = InverseDynamics(Mechanism.from_parameters(config['mechanism']),
+                             backend=config.get('backend', 'auto'))
     selector = JointSelector(config['active_joints'])
     options = {'unwrap': config['unwrap'], 'max_step': config['max_step'],
                'effort_limits': config['effort_limits'], 'max_points': config['max_points']}

@@ -186,8 +186,9 @@ class CogIdNode(Node):
         self.max_stamp_rejections = cfg['max_stamp_rejections']
         self.max_trajectory_points = cfg['max_trajectory_points']
 
-        self.solver = InverseDynamics(mech)              # the setpoint stream (warm-started)
-        self.report_solver = InverseDynamics(mech)       # residual and condition for diagnostics
+        self.backend = cfg['backend']
+        self.solver = InverseDynamics(mech, backend=self.backend)   # the setpoint stream
+        self.report_solver = InverseDynamics(mech, backend=self.backend)   # for diagnostics
         self.filter = SetpointFilter(n_act, cfg['estimator_window'], cfg['max_setpoint_interval'])
         self.selector = JointSelector(self.active_joints)
         self.outputs = EffortMessages(self.active_joints)
@@ -260,7 +261,7 @@ class CogIdNode(Node):
             {'mechanism': dict(mech.parameters), 'active_joints': self.active_joints,
              'unwrap': self.unwrap, 'max_step': self.max_step.tolist(),
              'effort_limits': self.effort_limits.tolist() if self.limited else None,
-             'max_points': self.max_trajectory_points},
+             'max_points': self.max_trajectory_points, 'backend': self.backend},
             self._trajectory_done)
         self.create_timer(cfg['diagnostics_period'], self.publish_diagnostics)
         if self.setpoint_timeout > 0.0:

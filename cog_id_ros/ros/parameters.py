@@ -24,6 +24,9 @@ MECHANISM_PREFIXES = ('mechanism.', 'links.', 'joints.')
 
 TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
 
+#: InverseDynamics(backend=...) choices
+BACKENDS = ('auto', 'native', 'python', 'reference')
+
 #: max_setpoint_step per joint type when the parameter is not given (rad, m)
 DEFAULT_MAX_STEP = {'revolute': 1.0, 'prismatic': 0.1}
 
@@ -190,6 +193,12 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'stamps must increase for the whole life of the node, see '
                     '`max_stamp_rejections`: to publish nothing at a stop, prefer '
                     '`timeout_behavior: none`)'),
+    NodeParameter(
+        'backend', 'string', 'auto', 'choice', choices=BACKENDS,
+        description="who computes the kernels (README, 'How it computes'): `auto` compiled C "
+                    'where a C compiler or a cached library is there, else Python; `native` '
+                    'compiled C or refuse to start; `python` never compile; `reference` the '
+                    'plain lane code (slow: for checking)'),
     NodeParameter(
         'timeout_behavior', 'string', 'hold', 'choice', choices=TIMEOUT_BEHAVIORS,
         description='what is published on `effort_command` when the stream stops, once: '

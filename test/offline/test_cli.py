@@ -117,6 +117,19 @@ def test_target_motion_a_equals_the_core_and_the_exact_torque(tmp_path):
     assert 'note:' in proc.stderr and 'joint1.position' in proc.stderr
 
 
+@pytest.mark.parametrize('backend', ['python', 'reference'])
+def test_the_backend_can_be_chosen_and_changes_no_number(tmp_path, backend):
+    """--backend: native off (python) or the plain lane code give the same file."""
+    for name, option in (('auto.csv', ()), (f'{backend}.csv', ('--backend', backend))):
+        proc = run_tool('--params-file', PARAMS_A, '--input', TARGET, '--output', name,
+                        *option, cwd=tmp_path)
+        assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / 'auto.csv').read_text() == (tmp_path / f'{backend}.csv').read_text()
+    proc = run_tool('--params-file', PARAMS_A, '--input', TARGET, '--output', 'x.csv',
+                    '--backend', 'fast', cwd=tmp_path)
+    assert proc.returncode != 0 and 'backend' in proc.stderr
+
+
 def test_target_motion_b_equals_the_core_and_splits_the_exact_torque(tmp_path):
     proc = run_tool('--params-file', PARAMS_B, '--input', TARGET, '--output', 'tau.csv',
                     cwd=tmp_path)
