@@ -104,7 +104,7 @@ class Driver:
     the answers (one SetpointLoop thread per command topic, outside any executor, so the
     driver's own executor is not what is measured); /diagnostics on an executor thread."""
 
-    def __init__(self, namespaces):
+    def __init__(self, namespaces, names=('joint3', 'joint1'), positions=None):
         import threading
 
         from diagnostic_msgs.msg import DiagnosticArray
@@ -118,6 +118,8 @@ class Driver:
         from cog_id_ros.ros.setpoint_loop import SetpointLoop
 
         self.JointState = JointState
+        self.names = list(names)
+        self.positions = positions or (lambda t: [math.pi / 2 + 0.5 * math.sin(math.pi * t)] * 2)
         self.node = rclpy.create_node('bench_driver', start_parameter_services=False)
         reader = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
                             reliability=ReliabilityPolicy.RELIABLE)
@@ -149,7 +151,7 @@ class Driver:
         t = time.perf_counter()
         if self.recv is not None:
             data = msg.data
-            if len(data) == 3:       # an echo: the sequence number rides along
+            if len(data) == len(self.names) + 1:   # an echo: the sequence number rides along
                 self.recv[int(data[-1])] = t
             else:                    # cog_id_node: torques only, matched by order
                 self.commands.append(t)
@@ -187,7 +189,7 @@ class Driver:
         self.commands = []
         self.recv = np.full(n, np.nan)
         msg = self.JointState()
-        msg.name = ['joint3', 'joint1', 'bench_seq']
+        msg.name = self.names + ['bench_seq']
         pub = self.pubs[ns]
         t0 = time.perf_counter()
         for i in range(n):
@@ -195,9 +197,8 @@ class Driver:
             left = t0 + t - time.perf_counter()
             if left > 0:
                 time.sleep(left)
-            theta = math.pi / 2 + 0.5 * math.sin(math.pi * t)
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(start_ns + i * period_ns, NS)
-            msg.position = [theta, theta, float(i)]
+            msg.position = self.positions(t) + [float(i)]
             sent[i] = time.perf_counter()
             pub.publish(msg)
         time.sleep(DRAIN)
@@ -209,6 +210,25 @@ class Driver:
         if commands.size != n:    # the k-th answers the k-th only when none was lost
             return None, n, int(n - commands.size)
         return (commands - sent)[WARM_UP:] * 1e6, n, 0
+
+
+def motion_of(params_file):
+    """(active joint names, positions(t)) to play: the paper's target motion for the paper
+    four-bar, else the file's test motion (test/trajectories.py) swept back and forth."""
+    name = os.path.basename(params_file)
+    if name.startswith('paper_four_bar'):
+        return ('joint3', 'joint1'), None
+    sys.path.insert(0, os.path.join(REPO, 'test'))
+    from trajectories import T_END, TRAJECTORIES
+
+    import cog_id_ros
+    mech = cog_id_ros.Mechanism.from_params_file(params_file)
+    law = TRAJECTORIES[name]
+
+    def positions(t):
+        s = 0.5 * T_END * (1.0 - math.cos(math.pi * t / T_END))   # there and back, smoothly
+        return [float(x) for x in law(np.array([s]))[0][0]]
+    return tuple(mech.active_joints), positions
 
 
 def percentiles(lat):
@@ -308,7 +328,7 @@ def main(argv=None):
     results, summary = [], []
     driver = None
     try:
-        driver = Driver([ns for ns, _ in peers])
+        driver = Driver([ns for ns, _ in peers], *motion_of(args.params_file))
         for ns, _ in peers:
             driver.wait_for(ns)
         for rate in args.rates:
