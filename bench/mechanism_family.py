@@ -28,9 +28,10 @@ Script mode prints, per member: joints, loops, DOF, the traced operation counts 
 """
 import argparse
 import datetime
+import json
 import math
 import os
-import resource
+import subprocess
 import sys
 import time
 
@@ -454,8 +455,26 @@ def members(family):
     return out
 
 
-def _rss_mb():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+def _peak_mb():
+    with open('/proc/self/status') as f:
+        return next(int(x.split()[1]) for x in f if x.startswith('VmHWM')) / 1024.0
+
+
+def measure(index, family):
+    """Load and trace one member in this (fresh) process; returns a dict of figures."""
+    import cog_id_ros
+    from cog_id_ros.core import kernels
+    label, make = members(family)[index]
+    params = make()
+    rss0 = _peak_mb()
+    t0 = time.perf_counter()
+    mech = cog_id_ros.Mechanism.from_parameters(params)
+    t1 = time.perf_counter()
+    ops = kernels.kernels_for(mech, 'python').operations
+    t2 = time.perf_counter()
+    return dict(label=label, joints=len(mech.joints), loops=len(mech.joints) - len(mech.links),
+                dof=mech.dof, active=len(mech.active_joints), ops=ops, load=t1 - t0,
+                trace=t2 - t1, peak=_peak_mb() - rss0)
 
 
 def main(argv=None):
@@ -465,35 +484,42 @@ def main(argv=None):
     ap.add_argument('--family', choices=('ups', 'delta', 'chain', 'all'), default='all')
     ap.add_argument('--write-configs', action='store_true',
                     help='rewrite config/stewart_6ups.yaml and config/delta_3rus.yaml, then stop')
+    ap.add_argument('--member', type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.write_configs:
         write_examples()
         return
-    import cog_id_ros
-    from cog_id_ros.core import kernels
-    print('command: ' + ' '.join([os.path.relpath(sys.executable, REPO), 'bench/mechanism_family.py'] + (argv if argv is not None else sys.argv[1:])))
+    if args.member is not None:            # one member, in a process of its own
+        print(json.dumps(measure(args.member, args.family)))
+        return
+    shown = sys.argv[1:] if argv is None else argv
+    print('command: ' + ' '.join([os.path.relpath(sys.executable, REPO), 'bench/mechanism_family.py'] + shown))
     print(f'date: {datetime.datetime.now().isoformat(timespec="seconds")}')
-    head = ('member', 'joints', 'loops', 'DOF', 'active', 'closure ops', 'dynamics ops',
-            'load s', 'trace s', 'RSS +MB')
+    head = ('member', 'joints', 'loops', 'DOF', 'active', 'prediction ops', 'closure ops',
+            'dynamics ops', 'load ms', 'trace s', 'peak RSS +MB')
     print('| ' + ' | '.join(head) + ' |')
     print('|' + '---|' * len(head))
     skipped = []
-    for label, make in members(args.family):
-        params = make()
-        n_j, n_l = len(params['mechanism.joints']), len(params['mechanism.links'])
+    for index, (label, make) in enumerate(members(args.family)):
+        n_j = len(make()['mechanism.joints'])
         if n_j > args.max_joints:
             skipped.append(f'{label} ({n_j} joints)')
             continue
-        rss0 = _rss_mb()
-        t0 = time.perf_counter()
-        mech = cog_id_ros.Mechanism.from_parameters(params)
-        t1 = time.perf_counter()
-        ops = kernels.kernels_for(mech, 'python').operations
-        t2 = time.perf_counter()
-        row = (label, n_j, n_j - n_l, mech.dof, len(mech.active_joints),
-               f'{ops.get("closure", 0):,}', f'{ops.get("dynamics", 0):,}',
-               f'{t1 - t0:.2f}', f'{t2 - t1:.2f}', f'{_rss_mb() - rss0:.0f}')
+        out = subprocess.run([sys.executable, os.path.abspath(__file__), '--family', args.family,
+                              '--member', str(index)], capture_output=True, text=True)
+        if out.returncode != 0:
+            print(f'| {label} | {n_j} | failed: {out.stderr.strip().splitlines()[-1]} |')
+            continue
+        m = json.loads(out.stdout.strip().splitlines()[-1])
+        ops = m['ops']
+        row = (label, m['joints'], m['loops'], m['dof'], m['active'],
+               f'{ops.get("prediction", 0):,}', f'{ops.get("closure", 0):,}',
+               f'{ops.get("dynamics", 0):,}', f'{m["load"] * 1e3:.1f}', f'{m["trace"]:.2f}',
+               f'{m["peak"]:.0f}')
         print('| ' + ' | '.join(str(x) for x in row) + ' |', flush=True)
+    print('ops: float operations of the traced straight-line kernels '
+          "(kernels_for(mech, 'python').operations); load: Mechanism.from_parameters; trace: "
+          "kernels_for(mech, 'python'); peak RSS: growth of the process's peak over both.")
     if skipped:
         print(f'skipped (more than --max-joints {args.max_joints} joints): ' + ', '.join(skipped))
 
