@@ -124,8 +124,8 @@ def _spherical(p, leg, parent, child, parent_xyz, child_xyz, child_rpy):
 
 # --------------------------------------------------------------------------- UPS platforms
 
-UPS = dict(base_radius=0.5, platform_radius=0.3, height=0.85, base_half_angle=10.0,
-           platform_half_angle=10.0, lower_length=0.4, upper_length=0.4)
+UPS = dict(base_radius=0.5, platform_radius=0.3, height=0.85, base_half_angle=5.0,
+           platform_half_angle=5.0, lower_length=0.4, upper_length=0.4)
 
 
 def ups_layout(k, g=UPS):
@@ -379,19 +379,19 @@ STEWART_HEADER = """\
 # Each leg i = 0..5: ground -U- lower leg (cylinder) -P- upper leg (rod) -S- platform.
 #   U  l<i>_u1 (about x), l<i>_u2 (about y) through the MASSLESS cross l<i>_cross, at the
 #      base point b_i on a circle of radius 0.5 m (z = 0). The attachment frame of l<i>_u1
-#      (parent_rpy [0, 0.3723, yaw_i]) has its z axis along the leg's home direction, so
+#      (parent_rpy [0, 0.4239, yaw_i]) has its z axis along the leg's home direction, so
 #      both U angles are near 0 and the joint would lock only with the leg along that
 #      frame's x axis, 90 degrees away (over the test motion |U angle| < 0.1 rad).
 #   P  l<i>_p, ACTIVE, along the leg (z): q = leg length (U centre to S centre) - 0.8 m,
-#      0.1125 m at home, 0.03 to 0.2 m over the test motion.
+#      0.1326 m at home, 0.05 to 0.22 m over the test motion.
 #   S  l<i>_s1 (x), l<i>_s2 (y), l<i>_s3 (z) through the MASSLESS helper links l<i>_sa,
 #      l<i>_sb, at the platform point c_i on a circle of radius 0.3 m in the platform frame.
 #      The platform-side attachment of l<i>_s3 has child_rpy = the leg's home frame, so the
 #      relative rotation is the identity at home: the middle angle l<i>_s2 stays within
 #      +-0.16 rad over the test motion, far from the gimbal lock at +-pi/2.
-# Base points in pairs at 120 j +- 10 degrees, platform points at 120 j + 60 -+ 10 degrees
+# Base points in pairs at 120 j +- 5 degrees, platform points at 120 j + 60 -+ 5 degrees
 # (the usual zig-zag, legs of a pair meeting near one platform edge); platform frame at
-# height 0.85 m at home, legs 0.9125 m long, 21 degrees from vertical.
+# height 0.85 m at home, legs 0.9326 m long, 24 degrees from vertical.
 # Masses: lower leg 3 kg (COG 0.2 m up the leg, valve block off the axis), upper leg 1.5 kg,
 # platform 10 kg with a full inertia (products of inertia, COG off centre).
 # DOF: 36 joint freedoms (6 x (2 + 1 + 3)); 31 moving links, so 36 - 31 = 5 loops of 6
@@ -400,7 +400,7 @@ STEWART_HEADER = """\
 # Test motion (test/trajectories.py): platform x = 0.04 sin(pi t), y = 0.03 (1 - cos(pi t)),
 # z = 0.85 + 0.05 sin(2 pi t) m, roll 0.08 sin(pi t), pitch 0.06 (1 - cos(pi t)), yaw
 # 0.10 sin(2 pi t) rad (R = Rz Ry Rx), t in [0, 2] s; leg extensions and their exact
-# derivatives by inverse kinematics. Closure condition number below 150 along it.
+# derivatives by inverse kinematics. Closure condition number below 130 along it.
 """
 
 DELTA_HEADER = """\
