@@ -36,7 +36,7 @@ for path in (REPO, HERE, os.path.join(REPO, 'test')):
     if path not in sys.path:
         sys.path.insert(0, path)
 
-from peer import Peer  # noqa: E402
+from peer import OraclePeer, Peer  # noqa: E402
 from trajectories import TRAJECTORIES  # noqa: E402
 
 import cog_id_ros  # noqa: E402
@@ -109,6 +109,9 @@ def main(argv=None):
                     help='passed to InverseDynamics(mech, backend=NAME) (default: its default)')
     ap.add_argument('--only', default=None, help='only configs whose file name contains NAME')
     ap.add_argument('--batch', type=int, default=10_000, help='samples in the batch call')
+    ap.add_argument('--oracle', action='store_true',
+                    help='also time the test oracle (test/pinocchio_reference.py) per sample, '
+                         'on the first 500 samples: the peer the speed issue measured')
     args = ap.parse_args(argv)
     kwargs = {} if args.backend is None else {'backend': args.backend}
     argv_shown = sys.argv[1:] if argv is None else argv
@@ -118,7 +121,7 @@ def main(argv=None):
     names = [n for n in names if n in TRAJECTORIES and (args.only is None or args.only in n)]
     head = ('mechanism', 'joints', 'loops', 'DOF', 'backend', 'ours us', 'peer us', 'ours/peer',
             'batch /s', 'peer /s', 'batch/peer', 'load s', 'load MB', 'cached load s',
-            'peer load s', 'check')
+            'peer load s', 'check') + (('oracle us', 'ours/oracle') if args.oracle else ())
     rows = []
     for name in names:
         path = os.path.join(REPO, 'config', name)
@@ -149,6 +152,15 @@ def main(argv=None):
                f'{rate / peer_rate:.1f}', f'{load_s:.3f}', f'{load_mb:.0f}', f'{cached_s:.3f}',
                f'{peer_load_s:.3f}',
                f'{err:.0e}')
+        if args.oracle:
+            oracle = OraclePeer(path)
+            times = []
+            for i in range(BLOCK):
+                t0 = time.perf_counter()
+                oracle.torques(q[i], qd[i], qdd[i])
+                times.append(time.perf_counter() - t0)
+            slow = statistics.median(times[20:])
+            row += (f'{slow * 1e6:.1f}', f'{med["ours"] / slow:.3f}')
         rows.append(row)
         print(f'  {name}: done', file=sys.stderr, flush=True)
     print('| ' + ' | '.join(head) + ' |')
@@ -159,7 +171,8 @@ def main(argv=None):
           "batch/peer: our batch samples/s over the peer's per-sample rate; load: "
           'Mechanism.from_params_file + InverseDynamics in a fresh process with an empty kernel '
           'cache (trace, compile), its peak RSS growth, and again from that cache; '
-          'check: largest |ours - peer| / max |tau| at the checked samples.')
+          'check: largest |ours - peer| / max |tau| at the checked samples; oracle: the test '
+          "oracle's median per sample (--oracle).")
 
 
 if __name__ == '__main__':

@@ -241,3 +241,18 @@ class Peer:
     def torques_many(self, q, qd, qdd):
         """N samples, one after the other (warm-started): (N, M)."""
         return np.array([self.torques(q[k], qd[k], qdd[k]) for k in range(len(q))])
+
+
+class OraclePeer:
+    """The peer the speed issue measured (771 us a sample on the Stewart platform): the test
+    oracle, test/pinocchio_reference.Oracle, timed per sample as it is, warm-started from
+    the previous pose (Gauss-Newton with numpy least squares, SVD null space, RNEA)."""
+
+    def __init__(self, path):
+        from pinocchio_reference import Oracle
+        self.oracle = Oracle(path)
+        self.q = None
+
+    def torques(self, q_active, qd_active, qdd_active):
+        self.q = self.oracle.solve_positions(q_active, q_guess=self.q)
+        return self.oracle.active_torques(self.q, qd_active, qdd_active)
