@@ -40,6 +40,10 @@ NEWTON_ITERATIONS = 12
 #: largest Newton increment (rad or m) applied at once; longer ones are scaled down
 NEWTON_MAX_INCREMENT = 0.5
 
+#: a Newton increment below this (rad or m) is checked for stagnation: below 1e-15 of the
+#: coordinates' size (a larger one cannot be, for coordinates within MAX_ANGLE or lengths)
+STAGNATION = 1e-5
+
 #: Gauss-Newton iterations of the redundant projection, and the increment that ends it
 PROJECTION_ITERATIONS = 6
 PROJECTION_TOLERANCE = 1e-14
@@ -160,7 +164,8 @@ class SampleSolver:
                 break
             increment = record.increment
             size = max(map(abs, increment))
-            if not size < math.inf or size < 1e-15 * (1.0 + max(abs(q[j]) for j in free)):
+            if not size < math.inf or size < STAGNATION and \
+                    size < 1e-15 * (1.0 + max([abs(q[j]) for j in free])):
                 break                               # NaN or infinite, or stagnated
             factor = min(1.0, NEWTON_MAX_INCREMENT / size)
             q = list(q)
