@@ -165,7 +165,7 @@ class SampleSolver:
             increment = record.increment
             size = max(map(abs, increment))
             if not size < math.inf or size < STAGNATION and \
-                    size < 1e-15 * (1.0 + max([abs(q[j]) for j in free])):
+                    size < 1e-15 * (1.0 + max(abs(q[j]) for j in free)):
                 break                               # NaN or infinite, or stagnated
             factor = min(1.0, NEWTON_MAX_INCREMENT / size)
             q = list(q)
