@@ -22,6 +22,7 @@ the core's source, kernels.NativeKernels), the Python version and the flags:
 Nothing here is needed to run: without a compiler or headers :class:`NativeUnavailable`
 says why and the caller falls back to the Python kernels.
 """
+import atexit
 import hashlib
 import importlib.machinery
 import importlib.util
@@ -112,21 +113,26 @@ def load_module(key, make_source):
         writable = os.access(directory, os.W_OK)
     except OSError:
         writable = False
-    if not writable:
-        directory = tempfile.mkdtemp(prefix='cog_id_ros-')
-        optimised = os.path.join(directory, name + '.O2' + _suffix())
-        quick = os.path.join(directory, name + '.O0' + _suffix())
-        sizes = os.path.join(directory, name + '.json')
-    c_file = os.path.join(directory, name + '.c')
-    _write_atomically(c_file, source)
-    _write_atomically(sizes, json.dumps(operations))
-    if sum(operations.values()) > QUICK_ABOVE:
-        _build(command, include, c_file, quick, '-O0')
-        if writable:
-            _build_in_background(command, include, c_file, optimised, '-O2')
-        return _import(name, quick), operations
-    _build(command, include, c_file, optimised, '-O2')
-    return _import(name, optimised), operations
+    try:
+        if not writable:                      # for this process only, removed at its exit
+            directory = tempfile.mkdtemp(prefix='cog_id_ros-')
+            atexit.register(shutil.rmtree, directory, ignore_errors=True)
+            optimised = os.path.join(directory, name + '.O2' + _suffix())
+            quick = os.path.join(directory, name + '.O0' + _suffix())
+            sizes = os.path.join(directory, name + '.json')
+        c_file = os.path.join(directory, name + '.c')
+        _write_atomically(c_file, source)
+        _write_atomically(sizes, json.dumps(operations))
+        if sum(operations.values()) > QUICK_ABOVE:
+            _build(command, include, c_file, quick, '-O0')
+            if writable:
+                _build_in_background(command, include, c_file, optimised, '-O2')
+            return _import(name, quick), operations
+        _build(command, include, c_file, optimised, '-O2')
+        return _import(name, optimised), operations
+    except (OSError, ImportError) as exc:     # a full disk, a file that will not load ...
+        raise NativeUnavailable(f'the compiled kernels could not be built or loaded in '
+                                f'{directory}: {exc}') from None
 
 
 def _import(name, path):
