@@ -14,6 +14,7 @@ the core's source, kernels.NativeKernels), the Python version and the flags:
 * the flags keep the numbers those of the Python kernels: no contraction into fused
   multiply-adds (``-ffp-contract=off``), no fast-math; every operation is the IEEE double
   operation Python does, so the kernels agree with ``backend='python'`` to the last bit;
+* a library not used for ``KEEP_DAYS`` days is removed when another one is built;
 * small kernels are compiled with ``-O2`` at once. A large one (more than
   ``QUICK_ABOVE`` operations, where -O2 takes seconds) is compiled with ``-O0`` at once,
   which is fast to build and several times slower to run, while ``-O2`` is built in the
@@ -23,6 +24,7 @@ Nothing here is needed to run: without a compiler or headers :class:`NativeUnava
 says why and the caller falls back to the Python kernels.
 """
 import atexit
+import glob
 import hashlib
 import importlib.machinery
 import importlib.util
@@ -34,6 +36,7 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
+import time
 
 #: flags of every build: IEEE doubles as Python computes them
 FLAGS = ['-shared', '-fPIC', '-ffp-contract=off', '-fno-fast-math']
@@ -100,9 +103,11 @@ def load_module(key, make_source):
             try:
                 with open(sizes, encoding='utf-8') as f:
                     operations = json.load(f)
-                return _import(name, path), operations
+                module = _import(name, path)
             except (ImportError, OSError, ValueError):
-                pass                          # a damaged file: build it again
+                continue                      # a damaged file: build it again
+            _touch(sizes)                     # in use: not pruned
+            return module, operations
     command = compiler()
     if command is None:
         raise NativeUnavailable('no C compiler (cc, gcc or clang on the PATH, or $CC)')
@@ -127,12 +132,40 @@ def load_module(key, make_source):
             _build(command, include, c_file, quick, '-O0')
             if writable:
                 _build_in_background(command, include, c_file, optimised, '-O2')
+                _prune(directory)
             return _import(name, quick), operations
         _build(command, include, c_file, optimised, '-O2')
+        if writable:
+            _prune(directory)
         return _import(name, optimised), operations
     except (OSError, ImportError) as exc:     # a full disk, a file that will not load ...
         raise NativeUnavailable(f'the compiled kernels could not be built or loaded in '
                                 f'{directory}: {exc}') from None
+
+
+#: days after its last use at which a cached library is removed (when another is built)
+KEEP_DAYS = 30
+
+
+def _touch(path):
+    try:
+        os.utime(path)
+    except OSError:
+        pass                                  # a read-only cache: nothing is pruned there
+
+
+def _prune(directory):
+    """Remove the libraries of this cache not used for KEEP_DAYS (every change of a
+    mechanism or of the package makes a new one; nothing else removes the old)."""
+    limit = time.time() - KEEP_DAYS * 86400.0
+    for sizes in glob.glob(os.path.join(directory, 'cog_id_kernels_*.json')):
+        try:
+            if os.path.getmtime(sizes) >= limit:
+                continue
+            for path in glob.glob(sizes[:-len('.json')] + '.*'):
+                os.unlink(path)
+        except OSError:
+            pass
 
 
 def _import(name, path):

@@ -127,3 +127,17 @@ def test_bad_input_to_a_compiled_kernel_is_a_python_error_not_a_crash(cache):
         compiled.dynamics([0.0] * 4)
     record = compiled.closure((1.6, 0.0, 0.0, 0.0))
     assert isinstance(record, kernels.ClosureRecord)
+
+
+def test_libraries_unused_for_a_month_are_pruned_when_another_is_built(cache):
+    cog_id_ros.InverseDynamics(fresh(), backend='native')
+    old = glob.glob(str(cache / '*.json'))[0]
+    month_ago = time.time() - (native.KEEP_DAYS + 1) * 86400.0
+    os.utime(old, (month_ago, month_ago))
+    cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
+    assert not os.path.exists(old) and not glob.glob(old[:-len('.json')] + '.*')
+    assert len(libraries(cache)) == 1
+    used = glob.glob(str(cache / '*.json'))[0]       # a load marks its library as used
+    os.utime(used, (month_ago, month_ago))
+    cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
+    assert os.path.getmtime(used) > month_ago + 86400.0
