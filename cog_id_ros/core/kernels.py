@@ -29,7 +29,6 @@ import hashlib
 import logging
 import os
 from typing import NamedTuple
-import weakref
 
 import numpy as np
 
@@ -252,7 +251,6 @@ def core_version():
 
 
 _CORE_VERSION = None
-_made = {'python': weakref.WeakKeyDictionary(), 'native': weakref.WeakKeyDictionary()}
 _log = logging.getLogger('cog_id_ros')
 
 
@@ -270,10 +268,11 @@ def kernels_for(mechanism, backend='auto'):
                                   TRACE_BUDGET):
         return ReferenceKernels(mechanism)
     if backend in ('auto', 'native'):
-        kernels = _made['native'].get(mechanism)
+        made = mechanism.kernels_made
+        kernels = made.get('native')
         if kernels is None:
             try:
-                kernels = _made['native'][mechanism] = NativeKernels(mechanism)
+                kernels = made['native'] = NativeKernels(mechanism)
             except native.NativeUnavailable as exc:
                 if backend == 'native':
                     raise MechanismConfigError(
@@ -286,9 +285,9 @@ def kernels_for(mechanism, backend='auto'):
                 backend = 'python'
         if backend != 'python':
             return kernels
-    kernels = _made['python'].get(mechanism)
+    kernels = mechanism.kernels_made.get('python')
     if kernels is None:
-        kernels = _made['python'][mechanism] = PythonKernels(mechanism)
+        kernels = mechanism.kernels_made['python'] = PythonKernels(mechanism)
     return kernels
 
 

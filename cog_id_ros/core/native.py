@@ -32,6 +32,7 @@ import json
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import sysconfig
@@ -39,13 +40,14 @@ import tempfile
 import time
 
 #: flags of every build: IEEE doubles as Python computes them
-FLAGS = ['-shared', '-fPIC', '-ffp-contract=off', '-fno-fast-math']
+FLAGS = ['-shared', '-fPIC', '-ffp-contract=off', '-fno-fast-math',
+         '-fno-unsafe-math-optimizations']
 
 #: operations (both kernels) above which the first build is -O0 and -O2 follows in background
 QUICK_ABOVE = 6000
 
-#: seconds a build may take before it counts as failed
-BUILD_TIMEOUT = 300
+#: seconds a build may take before it counts as failed (the compiler is then stopped)
+BUILD_TIMEOUT = 120
 
 
 class NativeUnavailable(Exception):
@@ -91,23 +93,24 @@ def load_module(key, make_source):
     text naming everything they are made of), from the cache or built now from
     ``make_source(module name) -> (C source, {kernel: operations})``. How large the kernels
     are chooses the optimisation."""
-    digest = hashlib.sha256('\0'.join([key, sys.version, _suffix(),
-                                       ' '.join(FLAGS)]).encode()).hexdigest()[:20]
+    explicit = os.environ.get('CC', '')       # a compiler of one's own: libraries of its own
+    digest = hashlib.sha256('\0'.join([key, sys.version, _suffix(), ' '.join(FLAGS),
+                                       explicit]).encode()).hexdigest()[:20]
     name = f'cog_id_kernels_{digest}'
     directory = cache_directory()
-    optimised = os.path.join(directory, name + '.O2' + _suffix())
-    quick = os.path.join(directory, name + '.O0' + _suffix())
-    sizes = os.path.join(directory, name + '.json')
-    for path in (optimised, quick):
-        if os.path.exists(path):
-            try:
-                with open(sizes, encoding='utf-8') as f:
-                    operations = json.load(f)
-                module = _import(name, path)
-            except (ImportError, OSError, ValueError):
-                continue                      # a damaged file: build it again
-            _touch(sizes)                     # in use: not pruned
-            return module, operations
+    paths = _paths(directory, name)
+    operations = _read_json(paths['json'])
+    if operations is not None:
+        for level in ('O2', 'O0'):
+            if _intact(paths[level]):
+                try:
+                    module = _import(name, paths[level])
+                except ImportError:
+                    continue                  # damaged all the same: built again below
+                _touch(paths['json'])         # in use: not pruned
+                if level == 'O0':             # an -O2 build that never finished: again
+                    _build_in_background(compiler(), directory, name)
+                return module, operations
     command = compiler()
     if command is None:
         raise NativeUnavailable('no C compiler (cc, gcc or clang on the PATH, or $CC)')
@@ -122,25 +125,51 @@ def load_module(key, make_source):
         if not writable:                      # for this process only, removed at its exit
             directory = tempfile.mkdtemp(prefix='cog_id_ros-')
             atexit.register(shutil.rmtree, directory, ignore_errors=True)
-            optimised = os.path.join(directory, name + '.O2' + _suffix())
-            quick = os.path.join(directory, name + '.O0' + _suffix())
-            sizes = os.path.join(directory, name + '.json')
-        c_file = os.path.join(directory, name + '.c')
-        _write_atomically(c_file, source)
-        _write_atomically(sizes, json.dumps(operations))
+            paths = _paths(directory, name)
+        _write_atomically(paths['c'], source)
+        _write_atomically(paths['json'], json.dumps(operations))
         if sum(operations.values()) > QUICK_ABOVE:
-            _build(command, include, c_file, quick, '-O0')
+            _build(command, include, paths['c'], paths['O0'], '-O0')
             if writable:
-                _build_in_background(command, include, c_file, optimised, '-O2')
+                _build_in_background(command, directory, name)
                 _prune(directory)
-            return _import(name, quick), operations
-        _build(command, include, c_file, optimised, '-O2')
+            return _import(name, paths['O0']), operations
+        _build(command, include, paths['c'], paths['O2'], '-O2')
         if writable:
             _prune(directory)
-        return _import(name, optimised), operations
+        return _import(name, paths['O2']), operations
     except (OSError, ImportError) as exc:     # a full disk, a file that will not load ...
         raise NativeUnavailable(f'the compiled kernels could not be built or loaded in '
                                 f'{directory}: {exc}') from None
+
+
+def _paths(directory, name):
+    base = os.path.join(directory, name)
+    return {'c': base + '.c', 'json': base + '.json', 'O2': base + '.O2' + _suffix(),
+            'O0': base + '.O0' + _suffix(), 'lock': base + '.O2.lock'}
+
+
+def _read_json(path):
+    try:
+        with open(path, encoding='utf-8') as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def _digest(path):
+    with open(path, 'rb') as f:
+        return hashlib.sha256(f.read()).hexdigest()
+
+
+def _intact(path):
+    """True when the library is there and is what was built: its sha256 is the one written
+    beside it when the build finished (a truncated library would crash the process)."""
+    try:
+        with open(path + '.sha256', encoding='ascii') as f:
+            return f.read().strip() == _digest(path)
+    except OSError:
+        return False
 
 
 #: days after its last use at which a cached library is removed (when another is built)
@@ -176,38 +205,103 @@ def _import(name, path):
     return module
 
 
-def _write_atomically(path, text):
+def _write_atomically(path, text, mode=0o644):
     fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), suffix='.tmp')
     with os.fdopen(fd, 'w', encoding='utf-8') as f:
         f.write(text)
+    os.chmod(tmp, mode)                       # readable by every user of a shared cache
     os.replace(tmp, path)
 
 
 def _build(command, include, c_file, target, level):
+    """Compile, then the library and its sha256 appear (the checksum last)."""
     fd, tmp = tempfile.mkstemp(dir=os.path.dirname(target), suffix=_suffix())
     os.close(fd)
     try:
-        done = subprocess.run([*command, level, *FLAGS, '-I' + include, c_file, '-o', tmp],
-                              capture_output=True, text=True, timeout=BUILD_TIMEOUT)
-    except (OSError, subprocess.TimeoutExpired) as exc:
+        compiling = subprocess.Popen([*command, level, *FLAGS, '-I' + include, c_file, '-o',
+                                      tmp], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                     text=True, start_new_session=True)
+        try:
+            _, errors = compiling.communicate(timeout=BUILD_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            os.killpg(compiling.pid, signal.SIGKILL)   # the compiler and what it started
+            compiling.communicate()
+            raise NativeUnavailable(f'the C compiler {command[0]} took more than '
+                                    f'{BUILD_TIMEOUT} s') from None
+    except OSError as exc:
         os.unlink(tmp)
         raise NativeUnavailable(f'the C compiler {command[0]} did not run: {exc}') from None
-    if done.returncode != 0:
+    except NativeUnavailable:
         os.unlink(tmp)
-        first = (done.stderr.strip().splitlines() or ['no message'])[0]
+        raise
+    if compiling.returncode != 0:
+        os.unlink(tmp)
+        first = (errors.strip().splitlines() or ['no message'])[0]
         raise NativeUnavailable(f'the C compiler {command[0]} failed: {first}')
+    os.chmod(tmp, 0o755)
+    digest = _digest(tmp)
     os.replace(tmp, target)
+    _write_atomically(target + '.sha256', digest + '\n')
 
 
-def _build_in_background(command, include, c_file, target, level):
-    """Build ``target`` in a detached process (it outlives this one if need be); the file
-    appears, complete, once the build has succeeded."""
-    tmp = target + f'.{os.getpid()}.tmp'
-    script = (f'{shlex.join([*command, level, *FLAGS, "-I" + include, c_file, "-o", tmp])} '
-              f'&& mv -f {shlex.quote(tmp)} {shlex.quote(target)} || rm -f {shlex.quote(tmp)}')
+#: the background build: a detached process (it outlives the one that starts it) that
+#: compiles, writes the library and then its checksum, and releases the lock
+_BACKGROUND = r"""
+import hashlib, os, signal, subprocess, sys
+if os.fork():
+    os._exit(0)                               # detached: the starter waits for nothing
+os.setsid()
+command, (c_file, target, lock, timeout) = sys.argv[1:-4], sys.argv[-4:]
+tmp = target + '.%d.tmp' % os.getpid()
+try:
+    p = subprocess.Popen(command + [c_file, '-o', tmp], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL, start_new_session=True)
     try:
-        subprocess.Popen(['sh', '-c', script], stdin=subprocess.DEVNULL,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                         start_new_session=True)
+        ok = p.wait(timeout=float(timeout)) == 0
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        ok = False
+    if ok:
+        os.chmod(tmp, 0o755)
+        digest = hashlib.sha256(open(tmp, 'rb').read()).hexdigest()
+        os.replace(tmp, target)
+        with open(target + '.sha256.tmp', 'w') as f:
+            f.write(digest + '\n')
+        os.chmod(target + '.sha256.tmp', 0o644)
+        os.replace(target + '.sha256.tmp', target + '.sha256')
+finally:
+    for path in (tmp, lock):
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+"""
+
+
+def _build_in_background(command, directory, name):
+    """Start the -O2 build of ``name`` unless one is under way (its lock is younger than
+    BUILD_TIMEOUT); the quick library serves meanwhile, and a later load uses the new one."""
+    if command is None:
+        return
+    paths = _paths(directory, name)
+    try:
+        if time.time() - os.path.getmtime(paths['lock']) < BUILD_TIMEOUT:
+            return                            # another process is building it
+        os.unlink(paths['lock'])              # a build that died: its lock is stale
     except OSError:
-        pass                                  # the quick build serves; next load tries again
+        pass
+    try:
+        os.close(os.open(paths['lock'], os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644))
+    except OSError:
+        return                                # someone else took it just now
+    try:
+        starter = subprocess.Popen(
+            [sys.executable, '-c', _BACKGROUND, *command, '-O2', *FLAGS, '-I' + _include(),
+             paths['c'], paths['O2'], paths['lock'], str(BUILD_TIMEOUT)],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        starter.wait()
+    except (OSError, NativeUnavailable):
+        try:
+            os.unlink(paths['lock'])
+        except OSError:
+            pass

@@ -31,6 +31,13 @@ def cache(tmp_path, monkeypatch):
     return directory
 
 
+def no_compiler(monkeypatch):
+    """No cc, gcc or clang on the PATH and no $CC."""
+    monkeypatch.delenv('CC', raising=False)
+    monkeypatch.setenv('PATH', '/nonexistent')
+    assert native.compiler() is None
+
+
 def libraries(directory, level='*'):
     return glob.glob(os.path.join(str(directory), f'cog_id_kernels_*.{level}.*so'))
 
@@ -40,7 +47,7 @@ def test_the_first_load_builds_and_caches_and_the_next_needs_no_compiler(cache, 
     assert solver.backend == 'native' and len(libraries(cache, 'O2')) == 1
     assert len(glob.glob(str(cache / '*.c'))) == 1       # the source kept beside it
     expected = solver.torques([1.6], [0.3], [1.0])
-    monkeypatch.setenv('CC', '/nonexistent/cc')             # no compiler from now on
+    no_compiler(monkeypatch)
     again = cog_id_ros.InverseDynamics(fresh(), backend='native')
     assert again.backend == 'native'
     assert np.array_equal(again.torques([1.6], [0.3], [1.0]), expected)
@@ -98,7 +105,7 @@ def test_a_cached_library_is_used_from_a_copy_elsewhere(cache, monkeypatch, tmp_
     shipped = tmp_path / 'shipped'
     shutil.copytree(cache, shipped)
     monkeypatch.setenv('COG_ID_ROS_CACHE', str(shipped))
-    monkeypatch.setenv('CC', '/nonexistent/cc')
+    no_compiler(monkeypatch)
     started = time.perf_counter()
     assert cog_id_ros.InverseDynamics(fresh(), backend='native').backend == 'native'
     assert time.perf_counter() - started < 5.0        # loaded, not built (no compiler)
@@ -141,3 +148,46 @@ def test_libraries_unused_for_a_month_are_pruned_when_another_is_built(cache):
     os.utime(used, (month_ago, month_ago))
     cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
     assert os.path.getmtime(used) > month_ago + 86400.0
+
+
+def test_a_damaged_library_is_built_again_not_loaded(cache):
+    """Review of issue 11: a truncated cached library crashed the process (SIGBUS) at every
+    later start; its checksum no longer matches, so it is built again."""
+    solver = cog_id_ros.InverseDynamics(fresh(), backend='native')
+    expected = solver.torques([1.6], [0.3], [1.0])
+    library, = libraries(cache)
+    with open(library, 'rb') as f:
+        whole = f.read()
+    damaged = library + '.damaged'
+    with open(damaged, 'wb') as f:          # a new file: the loaded one stays mapped intact
+        f.write(whole[:len(whole) // 3])
+    os.replace(damaged, library)
+    again = cog_id_ros.InverseDynamics(fresh(), backend='native')
+    assert np.array_equal(again.torques([1.6], [0.3], [1.0]), expected)
+    with open(library, 'rb') as f:
+        assert f.read() == whole or os.path.getsize(library) > len(whole) // 3
+
+
+def test_a_compiler_of_ones_own_gets_libraries_of_its_own(cache, monkeypatch):
+    cog_id_ros.InverseDynamics(fresh(), backend='native')
+    monkeypatch.setenv('CC', native.compiler()[0] + ' -O3')
+    cog_id_ros.InverseDynamics(fresh(), backend='native')
+    assert len(libraries(cache)) == 2
+
+
+def test_cached_files_are_readable_by_every_user(cache):
+    cog_id_ros.InverseDynamics(fresh(), backend='native')
+    for path in glob.glob(str(cache / 'cog_id_kernels_*')):
+        assert os.stat(path).st_mode & 0o444 == 0o444, path
+
+
+def test_no_second_background_build_while_one_is_under_way(cache, monkeypatch):
+    monkeypatch.setattr(native, 'QUICK_ABOVE', 0)
+    cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
+    locks = glob.glob(str(cache / '*.lock'))
+    optimised = libraries(cache, 'O2')
+    assert locks or optimised                 # under way, or already done
+    deadline = time.monotonic() + 60.0
+    while glob.glob(str(cache / '*.lock')) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not glob.glob(str(cache / '*.lock')) and len(libraries(cache, 'O2')) == 1
