@@ -117,6 +117,7 @@ mechanism parameter file) of the cog_id_ros package.
 DIAGNOSTIC_KEYS = {
     'mechanism': 'the mechanism name',
     'active_joints': 'the active joints, in effort order',
+    'backend': "who computes the kernels: native, python or reference (parameter 'backend')",
     'setpoints_accepted': 'setpoints served since start',
     'setpoints_rejected': 'setpoints rejected since start (sum of rejected.<kind>)',
     'setpoints_lost': 'setpoints the single publisher of joint_setpoint sent that never reached '
@@ -677,6 +678,7 @@ class CogIdNode(Node):
         values = [
             ('mechanism', self.mechanism.name),
             ('active_joints', ', '.join(self.active_joints)),
+            ('backend', self.solver.backend),
             ('setpoints_accepted', self.counts['accepted']),
             ('setpoints_rejected', n_rejected),
             *((f'rejected.{reason}', count) for reason, count in self.rejected.items()),
