@@ -29,6 +29,7 @@ from .sample_solve import (
     PROJECTION_ITERATIONS,
     PROJECTION_TOLERANCE,
 )
+from .straight_line import leaves
 
 
 class Evaluation:
@@ -301,3 +302,16 @@ class Batch:
 def columns(array):
     """(N, k) array -> list of k lanes of shape (N,)."""
     return [array[:, a] for a in range(array.shape[1])]
+
+
+def stacked(nested):
+    """Nested lists of lanes (floats, or (N,) arrays) -> an array (...) or (N, ...)."""
+    n = next((x.shape[0] for x in leaves(nested) if isinstance(x, np.ndarray) and x.ndim),
+             None)
+    return np.array(nested, dtype=float) if n is None else _stacked(nested, n)
+
+
+def _stacked(nested, n):
+    if isinstance(nested, (list, tuple)):
+        return np.stack([_stacked(x, n) for x in nested], axis=1)
+    return np.broadcast_to(np.asarray(nested, dtype=float), (n,))

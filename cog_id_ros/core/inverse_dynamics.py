@@ -13,7 +13,7 @@ import numpy as np
 
 from . import closure
 from . import spatial as sp
-from .batch import Batch, Evaluation, columns, pose_of
+from .batch import Batch, Evaluation, columns, pose_of, stacked
 from .cog_jacobian import cog_drifts, cog_jacobians, cog_poses, cog_velocities
 from .errors import CogIdError, MechanismConfigError, SetpointError
 from .inputs import check_values, one_sample, out_of_range, setpoint_arrays
@@ -124,8 +124,8 @@ class InverseDynamics:
         """g_i (eq. 1): (positions (..., n_links, 3), rotations (..., n_links, 3, 3))."""
         at = self._poses(q, None)
         cogs = cog_poses(self.mechanism, at.pose.frames)
-        positions = self._moved_to(at, _stack([list(c) for c, _ in cogs]), keep=True)
-        rotations = self._moved_to(at, _stack([list(r) for _, r in cogs]))
+        positions = self._moved_to(at, stacked([list(c) for c, _ in cogs]), keep=True)
+        rotations = self._moved_to(at, stacked([list(r) for _, r in cogs]))
         return positions, rotations.reshape(rotations.shape[:-1] + (3, 3))
 
     def cog_jacobians(self, q: ArrayLike) -> np.ndarray:
@@ -133,7 +133,7 @@ class InverseDynamics:
         COG (linear) and the link (angular), base frame."""
         at = self._poses(q, None)
         _, jac, _ = self._cog_jacobians(at)
-        return self._moved_to(at, _stack([[[gv[r] for gv, _ in cols] for r in range(3)] +
+        return self._moved_to(at, stacked([[[gv[r] for gv, _ in cols] for r in range(3)] +
                                           [[gw[r] for _, gw in cols] for r in range(3)]
                                           for cols in jac]))
 
@@ -145,7 +145,7 @@ class InverseDynamics:
         with np.errstate(all='ignore'):          # overflow is reported by _moved_to
             drifts = cog_drifts(cogs, cog_velocities(jac, at.rates),
                                 drift_accelerations(self.mechanism, at.pose, s, at.rates))
-        return self._moved_to(at, _stack([list(a) + list(alpha) for a, alpha in drifts]))
+        return self._moved_to(at, stacked([list(a) + list(alpha) for a, alpha in drifts]))
 
     def equation_of_motion(self, q: ArrayLike, qd: Optional[ArrayLike] = None
                            ) -> Tuple[np.ndarray, np.ndarray]:
@@ -153,7 +153,7 @@ class InverseDynamics:
         at = self._poses(q, qd)
         with np.errstate(all='ignore'):          # overflow is reported by _moved_to
             h, b = equation_of_motion(self.mechanism, at.pose, at.basis, at.rates, at.ops)
-        return self._moved_to(at, _stack(h), keep=True), self._moved_to(at, _stack(b))
+        return self._moved_to(at, stacked(h), keep=True), self._moved_to(at, stacked(b))
 
     # --- helpers ------------------------------------------------------------------------
 
@@ -239,24 +239,3 @@ class _Poses(NamedTuple):
     state: tuple               # the warm start there
     qd: np.ndarray             # (N, M), for messages
     single: bool
-
-
-def _stack(nested):
-    """Nested lists of lanes (floats or (N,) arrays) -> array (...) or (N, ...)."""
-    n = next((x.shape[0] for x in _leaves(nested) if isinstance(x, np.ndarray) and x.ndim),
-             None)
-    return np.array(nested, dtype=float) if n is None else _stack_lanes(nested, n)
-
-
-def _stack_lanes(nested, n):
-    if isinstance(nested, (list, tuple)):
-        return np.stack([_stack_lanes(x, n) for x in nested], axis=1)
-    return np.broadcast_to(np.asarray(nested, dtype=float), (n,))
-
-
-def _leaves(nested):
-    if isinstance(nested, (list, tuple)):
-        for x in nested:
-            yield from _leaves(x)
-    else:
-        yield nested
