@@ -47,7 +47,7 @@ def one_sample(mechanism, wrapping, q, qd, qdd):
     if type(q) is list and type(qd) is list and type(qdd) is list and \
             len(q) == len(qd) == len(qdd) == m:  # what a control loop passes: checked at once
         every = q + qd + qdd
-        if all(type(x) is float for x in every) and math.isfinite(math.fsum(map(abs, every))) \
+        if all(type(x) is float for x in every) and all(map(math.isfinite, every)) \
                 and all(-MAX_ANGLE <= q[a] <= MAX_ANGLE for a in wrapping):
             return q, qd, qdd
     out = []

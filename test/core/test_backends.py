@@ -271,6 +271,10 @@ def test_sample_torques_reports_bad_input_like_torques_and_keeps_the_warm_start(
         solver.sample_torques([0.0], [0.0], [0.0])
     assert solver.sample_torques([1.52], [0.1], [0.0]) == twin.sample_torques([1.52], [0.1], [0.0])
     assert solver.sample_torques([1.5], None, None) == solver.torques([1.5]).tolist()
+    # large finite rates are out_of_range, not an OverflowError of the input check
+    with pytest.raises(cog_id_ros.SetpointError) as info:
+        solver.sample_torques([1.5], [1e308], [1e308])
+    assert info.value.reason == 'out_of_range'
 
 
 def test_a_mechanism_is_read_only_so_every_backend_computes_the_same_one():
