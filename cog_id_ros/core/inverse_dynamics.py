@@ -14,13 +14,12 @@ import numpy as np
 from . import closure
 from . import spatial as sp
 from .batch import Batch, Evaluation, columns, pose_of, stacked
-from .cog_jacobian import cog_drifts, cog_jacobians, cog_poses, cog_velocities
+from .cog_jacobian import cog_poses
 from .errors import CogIdError, MechanismConfigError, SetpointError
 from .inputs import check_values, one_sample, out_of_range, setpoint_arrays
-from .joint_motion import active_velocity_map
 from .kernels import kernels_for
 from .mechanism import Mechanism
-from .pipeline import drift_accelerations, equation_of_motion
+from .pipeline import cog_jacobians_at, cog_motion, equation_of_motion
 from .sample_solve import SampleSolver
 
 ArrayLike = Union[float, Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -132,7 +131,7 @@ class InverseDynamics:
         """G_i (eq. 3): (n_links, 6, M) or (N, n_links, 6, M); rows vx vy vz wx wy wz of the
         COG (linear) and the link (angular), base frame."""
         at = self._poses(q, None)
-        _, jac, _ = self._cog_jacobians(at)
+        _, _, jac = cog_jacobians_at(self.mechanism, at.pose, at.basis, at.ops)
         return self._moved_to(at, stacked([[[gv[r] for gv, _ in cols] for r in range(3)] +
                                           [[gw[r] for _, gw in cols] for r in range(3)]
                                           for cols in jac]))
@@ -141,10 +140,8 @@ class InverseDynamics:
         """Gdot_i thetadot (eq. 4): (n_links, 6) or (N, n_links, 6): COG acceleration and link
         angular acceleration when thetaddot = 0."""
         at = self._poses(q, qd)
-        s, jac, cogs = self._cog_jacobians(at)
         with np.errstate(all='ignore'):          # overflow is reported by _moved_to
-            drifts = cog_drifts(cogs, cog_velocities(jac, at.rates),
-                                drift_accelerations(self.mechanism, at.pose, s, at.rates))
+            _, _, _, drifts = cog_motion(self.mechanism, at.pose, at.basis, at.rates, at.ops)
         return self._moved_to(at, stacked([list(a) + list(alpha) for a, alpha in drifts]))
 
     def equation_of_motion(self, q: ArrayLike, qd: Optional[ArrayLike] = None
@@ -222,12 +219,6 @@ class InverseDynamics:
         if not keep:
             self._state = at.state
         return values
-
-    def _cog_jacobians(self, at):
-        m = self.mechanism
-        s = active_velocity_map(m, at.basis, at.ops)
-        cogs = cog_poses(m, at.pose.frames)
-        return s, cog_jacobians(m, at.pose.frames, cogs, s)[0], cogs
 
 
 class _Poses(NamedTuple):

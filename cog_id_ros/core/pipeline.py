@@ -10,10 +10,12 @@
     tau_m = sum_i G_i^T F_i                (6)-(7)                        here
           = H(theta_m) thetaddot_m + B(theta_m, thetadot_m)
 
-:func:`inverse_dynamics` is that table as code. Every path of the solver runs it: on Python
-floats for one sample (``backend='reference'``), traced once into straight-line kernels
-(``backend='python'``, kernels.py), and on numpy arrays for a batch (batch.py). ``ops`` says
-which: spatial.ScalarOps, spatial.ArrayOps or straight_line.SymOps.
+:func:`inverse_dynamics` is that table as code, its lines (1)-(4) in :func:`cog_motion`
+(which eq. (7)'s H and B and the solver's cog_drifts use too). Every path of the solver
+runs it: on Python floats for one sample (``backend='reference'``), traced once into
+straight-line kernels (``backend='python'``, ``'native'``: kernels.py), and on numpy arrays
+for a batch with the reference kernels. ``ops`` says which: spatial.ScalarOps,
+spatial.ArrayOps or straight_line.SymOps.
 """
 from . import closure
 from . import spatial as sp
@@ -25,25 +27,34 @@ from .newton_euler import newton_euler_force, rotated_inertia_times
 
 def inverse_dynamics(mechanism, pose, basis, thetadot, thetaddot, ops):
     """tau_m (eq. 7) at a closed pose (closure.ClosureSolution) with velocity basis V."""
-    s = active_velocity_map(mechanism, basis, ops)                  # qdot = S thetadot
-    cogs = cog_poses(mechanism, pose.frames)                        # (1) g_i
-    jac, _ = cog_jacobians(mechanism, pose.frames, cogs, s)         # (3) G_i
-    velocities = cog_velocities(jac, thetadot)                      # (2) G_i thetadot
-    drifts = cog_drifts(cogs, velocities,                           # (4) Gdot_i thetadot
-                        drift_accelerations(mechanism, pose, s, thetadot))
+    cogs, jac, velocities, drifts = cog_motion(mechanism, pose, basis, thetadot, ops)  # (1)-(4)
     accelerations = cog_accelerations(jac, drifts, thetaddot)       # (4) qddot_i
     forces = link_forces(mechanism, cogs, velocities, accelerations)  # (5) F_i
     return active_torques(jac, forces)                              # (6)-(7) sum G_i^T F_i
 
 
+def cog_motion(mechanism, pose, basis, thetadot, ops):
+    """Eqs. (1)-(4) at a closed pose: COG poses g_i, COG Jacobians G_i, velocities
+    G_i thetadot and drifts Gdot_i thetadot (the COG accelerations when thetaddot = 0)."""
+    s, cogs, jac = cog_jacobians_at(mechanism, pose, basis, ops)    # (1), (3)
+    velocities = cog_velocities(jac, thetadot)                      # (2) G_i thetadot
+    drifts = cog_drifts(cogs, velocities,                           # (4) Gdot_i thetadot
+                        drift_accelerations(mechanism, pose, s, thetadot))
+    return cogs, jac, velocities, drifts
+
+
+def cog_jacobians_at(mechanism, pose, basis, ops):
+    """The joint-rate map S, g_i (eq. 1) and G_i (eq. 3) at a closed pose."""
+    s = active_velocity_map(mechanism, basis, ops)                  # qdot = S thetadot
+    cogs = cog_poses(mechanism, pose.frames)                        # (1) g_i
+    jac, _ = cog_jacobians(mechanism, pose.frames, cogs, s)         # (3) G_i
+    return s, cogs, jac
+
+
 def equation_of_motion(mechanism, pose, basis, thetadot, ops):
     """H and B of eq. (7): tau = H thetaddot + B. B is eq. (7) with thetaddot = 0; H is
     sum_i G_i^T M_i G_i."""
-    s = active_velocity_map(mechanism, basis, ops)
-    cogs = cog_poses(mechanism, pose.frames)
-    jac, _ = cog_jacobians(mechanism, pose.frames, cogs, s)
-    velocities = cog_velocities(jac, thetadot)
-    drifts = cog_drifts(cogs, velocities, drift_accelerations(mechanism, pose, s, thetadot))
+    cogs, jac, velocities, drifts = cog_motion(mechanism, pose, basis, thetadot, ops)
     b = active_torques(jac, link_forces(mechanism, cogs, velocities, drifts))
     return inertia_matrix(mechanism, cogs, jac), b
 
