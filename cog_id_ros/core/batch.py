@@ -4,12 +4,14 @@ The samples are solved on the branch that sample-by-sample continuation (sample_
 reaches, at a fraction of its cost:
 
 1. serial anchors every continuation step of actuator travel;
-2. between them, an interpolated start for every sample, then one vectorised Newton solve
-   of all samples (and the redundant projection) on arrays of shape (N,);
+2. between them, an interpolated start for every sample, then Newton's method on all
+   samples at once (and the redundant projection), by the kernels' *_many forms (C loops
+   with the native backend, the lane code on (N,) arrays otherwise);
 3. a check of every sample against its predecessor by the serial path's own rules (one
    continuation step away, a small Newton correction of the first-order prediction), and
    a serial re-solve, in order, of every sample that fails it;
-4. eqs. (1)-(7) (pipeline.py) on arrays, and the per-sample status (an Evaluation).
+4. eqs. (1)-(7) (pipeline.py) by the dynamics kernel, and the per-sample status (an
+   Evaluation).
 """
 import heapq
 import math
@@ -21,7 +23,7 @@ from . import spatial as sp
 from .continuation import correction_ok, fits_one_step, prediction
 from .errors import CogIdError
 from .inputs import check_values, out_of_range
-from .joint_motion import velocity_basis
+from .joint_motion import projected_pose, velocity_basis
 from .kernels import ClosureRecord, PoseRecord, unpack
 from .sample_solve import (
     NEWTON_ITERATIONS,
@@ -54,21 +56,12 @@ class Evaluation:
         self.condition_number = condition
 
 
-class BatchPose:
-    """Closed poses of N samples on (N,) lanes: the closure solution, velocity basis,
-    redundant mismatch and condition number."""
-    __slots__ = ('pose', 'basis', 'mismatch', 'condition')
-
-    def __init__(self, pose, basis, mismatch, condition):
-        self.pose, self.basis, self.mismatch, self.condition = pose, basis, mismatch, condition
-
-
-def pose_of(mechanism, positions, mismatch=0.0):
-    """BatchPose at given positions (N, n_joints), nothing solved."""
+def pose_of(mechanism, positions):
+    """(closure solution, velocity basis) of N poses (N, n_joints) on (N,) lanes, for the
+    lane code of eqs. (1)-(4); nothing solved."""
     pose = closure.evaluate(mechanism.model, columns(positions), mechanism.free_joints,
                             sp.ArrayOps)
-    return BatchPose(pose, velocity_basis(mechanism, pose), mismatch,
-                     pose.lsq.condition_number())
+    return pose, velocity_basis(mechanism, pose)
 
 
 class Batch:
@@ -91,9 +84,8 @@ class Batch:
             for i in np.flatnonzero(~finite):
                 q[i] = q[i - 1] if i > 0 else [state[0][j] for j in m.active_index]
         with np.errstate(all='ignore'):
-            solved = self.positions(state, q, on_invalid, invalid=~finite, qd=qd, qdd=qdd)
-            positions, ok, errors, new_state = solved[1:]
-            record = solved[0]
+            record, positions, ok, errors, new_state = self.positions(
+                state, q, on_invalid, invalid=~finite, qd=qd, qdd=qdd)
             tau = record.torques.copy()
             residual = np.abs(record.residual).max(axis=1, initial=0.0)
             condition = record.condition.copy()
@@ -192,9 +184,10 @@ class Batch:
             dz = record.projection
             if np.all(np.abs(dz).max(axis=1) < PROJECTION_TOLERANCE):
                 break
-            moved = q - np.einsum('njk,nk->nj', self.basis(record), dz)
-            moved[:, m.primary_joints] = q[:, m.primary_joints] - dz
-            q, converged = self.newton(moved)
+            basis = self.basis(record)
+            moved = projected_pose(m, columns(q), [columns(row) for row in basis.swapaxes(0, 1)],
+                                   columns(dz))
+            q, converged = self.newton(np.column_stack(moved))
             flat = self.kernels.dynamics_many(q, qa, qd, qdd)
         return q, flat, converged, np.abs(q[:, m.active_index] - qa).max(axis=1)
 
