@@ -155,14 +155,17 @@ class InverseDynamics:
     # --- helpers ------------------------------------------------------------------------
 
     def _serve_one(self, target, qd, qdd, sample=None):
-        """Torques of one well-formed sample (lists of floats); the warm start moves on only
-        when they are served (finite)."""
+        """Torques of one well-formed sample (lists of floats); the warm start moves on."""
+        record, self._state = self._solve_one(target, qd, qdd, sample)
+        return list(record.torques)
+
+    def _solve_one(self, target, qd, qdd, sample=None):
+        """(PoseRecord, new state) of one sample whose torques are finite, else the error
+        that says why; the warm start is not moved here."""
         record, state = self._serial.solve(self._state, target, qd, qdd, sample)
-        tau = list(record.torques)
-        if not all(map(math.isfinite, tau)):
+        if not all(map(math.isfinite, record.torques)):
             raise out_of_range(qd, qdd, sample)
-        self._state = state
-        return tau
+        return record, state
 
     def _evaluate_one(self, q, qd, qdd, on_invalid):
         m, n_act = self.mechanism, len(q)
@@ -170,9 +173,7 @@ class InverseDynamics:
             _, errors = check_values(m, self._serial.wrapping, q[None], qd[None], qdd[None], True)
             if errors:
                 raise errors[0]
-            record, state = self._serial.solve(self._state, q.tolist(), qd.tolist(), qdd.tolist())
-            if not all(map(math.isfinite, record.torques)):
-                raise out_of_range(qd.tolist(), qdd.tolist(), None)
+            record, state = self._solve_one(q.tolist(), qd.tolist(), qdd.tolist())
         except CogIdError as exc:
             if on_invalid == 'raise':
                 raise
@@ -203,9 +204,8 @@ class InverseDynamics:
                           state, qd, single)
         with np.errstate(all='ignore'):
             _, positions, _, _, state = self._batch.positions(self._state, q, 'raise')
-            poses = pose_of(m, positions)
-        return _Poses(positions, poses.pose, poses.basis, columns(qd), sp.ArrayOps, state, qd,
-                      single)
+            pose, basis = pose_of(m, positions)
+        return _Poses(positions, pose, basis, columns(qd), sp.ArrayOps, state, qd, single)
 
     def _moved_to(self, at, values, keep=False):
         """``values`` computed at ``at``, once known to be finite: the warm start moves to
