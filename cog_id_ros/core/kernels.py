@@ -113,12 +113,17 @@ def layouts(mechanism):
                                    ('projection', (dof,) if m.is_redundant else (0,))]}
 
 
+def width(layout):
+    """Numbers in a record of ``layout`` (a field of shape () holds one)."""
+    return sum(int(np.prod(shape)) for _, shape in layout)
+
+
 def unpack(flat, layout, record):
     """The record of N samples from their flat outputs (N, outputs): each field an array of
     shape (N,) + its shape (views, no copies)."""
     fields, offset = [], 0
     for _, shape in layout:
-        size = int(np.prod(shape)) if shape else 1
+        size = int(np.prod(shape))
         block = flat[:, offset:offset + size]
         fields.append(block[:, 0] if not shape else block.reshape((len(flat),) + shape))
         offset += size
@@ -206,15 +211,13 @@ class NativeKernels(ReferenceKernels):
 
     def __init__(self, mechanism):
         super().__init__(mechanism)
-        self.traced = None
         key = repr(sorted(mechanism.parameters.items())) + core_version()
         module, self.operations = native.load_module(key, self._source)
         module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
         self.prediction = module.prediction
         self.closure, self.dynamics = module.closure, module.dynamics
         self.module = module
-        self.widths = {name: sum(int(np.prod(shape)) if shape else 1 for _, shape in layout)
-                       for name, layout in self.layouts.items()}
+        self.widths = {name: width(layout) for name, layout in self.layouts.items()}
 
     def closure_many(self, q):
         return self._many('closure', q)
@@ -229,11 +232,11 @@ class NativeKernels(ReferenceKernels):
         return out
 
     def _source(self, module):
-        """(C source of the module, operations per kernel); traces on first use."""
-        if self.traced is None:
-            self.traced = trace(self.mechanism)
+        """(C source of the module, operations per kernel): traced here, only when the
+        library must be built, and not kept (a large mechanism's trace is tens of MB)."""
         return c_module_source(module, [(name, params, record.__name__, fields)
-                                        for name, params, record, fields in self.traced])
+                                        for name, params, record, fields in
+                                        trace(self.mechanism)])
 
 
 def core_version():
