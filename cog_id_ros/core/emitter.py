@@ -44,9 +44,7 @@ def python_source(name, params, record, fields):
     value) with value a Sym, a float or nested lists of them (emitted as tuples).
     Returns (source, number of operations).
     """
-    outputs = [x for _, value in fields for x in leaves(value)]
-    graph = next((o.graph for o in outputs if isinstance(o, Sym)), None) or \
-        next((s.graph for _, syms in params for s in syms), None)
+    outputs, graph, operations = _program(params, fields)
     names = {}
     lines = [f'def {name}({", ".join(p for p, _ in params)}):']
     for p, syms in params:
@@ -56,7 +54,6 @@ def python_source(name, params, record, fields):
     def operand(a):
         return names[a] if isinstance(a, int) else _literal(a)
 
-    operations = live_operations(graph, outputs) if graph is not None else []
     for k in operations:
         op, args = graph.nodes[k]
         names[k] = f't{k}'
@@ -72,6 +69,16 @@ def python_source(name, params, record, fields):
     lines += [f'        {literal(value)},  # {field}' for field, value in fields]
     lines.append('    ))')
     return '\n'.join(lines) + '\n', len(operations)
+
+
+def _program(params, fields):
+    """What both emitters write: the kernel's outputs (leaves of ``fields``), their graph and
+    the operations they depend on, in recording order."""
+    outputs = [x for _, value in fields for x in leaves(value)]
+    graph = next((o.graph for o in outputs if isinstance(o, Sym)), None) or \
+        next((s.graph for _, syms in params for s in leaves(syms)), None)
+    operations = live_operations(graph, outputs) if graph is not None else []
+    return outputs, graph, operations
 
 
 def _unpacking(prefix, syms, names):
@@ -295,14 +302,11 @@ def c_kernel_source(index, name, params, fields):
     of ``fields`` (as :func:`python_source`), and of ``name_many``, the same kernel over N
     samples at once (see :func:`c_module_source`). Returns (source, number of operations,
     number of outputs)."""
-    outputs = [x for _, value in fields for x in leaves(value)]
-    graph = next((o.graph for o in outputs if isinstance(o, Sym)), None) or \
-        next((s.graph for _, syms in params for s in syms), None)
+    outputs, graph, operations = _program(params, fields)
     names = {}
     for p, syms in params:
         for k, s in enumerate(leaves(syms)):
             names[s.k] = f'{p}[{k}]'
-    operations = live_operations(graph, outputs) if graph is not None else []
     for k in operations:
         names[k] = f't{k}'
 
