@@ -245,37 +245,30 @@ def _build(command, include, c_file, target, level):
 
 
 #: the background build: a detached process (it outlives the one that starts it) that
-#: compiles, writes the library and then its checksum, and releases the lock
+#: loads this module (standard library only) and runs _build_detached
 _BACKGROUND = r"""
-import hashlib, os, signal, subprocess, sys
+import importlib.util, json, os, sys
 if os.fork():
     os._exit(0)                               # detached: the starter waits for nothing
 os.setsid()
-command, (c_file, target, lock, timeout) = sys.argv[1:-4], sys.argv[-4:]
-tmp = target + '.%d.tmp' % os.getpid()
-try:
-    p = subprocess.Popen(command + [c_file, '-o', tmp], stdout=subprocess.DEVNULL,
-                         stderr=subprocess.DEVNULL, start_new_session=True)
+spec = importlib.util.spec_from_file_location('cog_id_ros_native_build', sys.argv[1])
+native = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(native)
+native._build_detached(*json.loads(sys.argv[2]))
+"""
+
+
+def _build_detached(command, include, c_file, target, lock, level):
+    """The background build (in its own process): :func:`_build`, then the lock goes."""
     try:
-        ok = p.wait(timeout=float(timeout)) == 0
-    except subprocess.TimeoutExpired:
-        os.killpg(p.pid, signal.SIGKILL)
-        ok = False
-    if ok:
-        os.chmod(tmp, 0o755)
-        digest = hashlib.sha256(open(tmp, 'rb').read()).hexdigest()
-        os.replace(tmp, target)
-        with open(target + '.sha256.tmp', 'w') as f:
-            f.write(digest + '\n')
-        os.chmod(target + '.sha256.tmp', 0o644)
-        os.replace(target + '.sha256.tmp', target + '.sha256')
-finally:
-    for path in (tmp, lock):
+        _build(command, include, c_file, target, level)
+    except (NativeUnavailable, OSError):
+        pass                                  # the quick library serves; a later load retries
+    finally:
         try:
-            os.unlink(path)
+            os.unlink(lock)
         except OSError:
             pass
-"""
 
 
 def _build_in_background(command, directory, name):
@@ -295,9 +288,10 @@ def _build_in_background(command, directory, name):
     except OSError:
         return                                # someone else took it just now
     try:
+        arguments = [command, _include(), paths['c'], paths['O2'], paths['lock'], '-O2']
         starter = subprocess.Popen(
-            [sys.executable, '-c', _BACKGROUND, *command, '-O2', *FLAGS, '-I' + _include(),
-             paths['c'], paths['O2'], paths['lock'], str(BUILD_TIMEOUT)],
+            [sys.executable, '-c', _BACKGROUND, os.path.abspath(__file__),
+             json.dumps(arguments)],
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         starter.wait()
     except (OSError, NativeUnavailable):
