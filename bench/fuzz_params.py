@@ -25,7 +25,6 @@ import re
 import sys
 import tempfile
 import time
-import traceback
 import warnings
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -33,6 +32,7 @@ REPO = os.path.dirname(HERE)
 for _folder in ('test', os.path.join('test', 'core')):   # test_fuzz and its helpers
     sys.path.insert(0, os.path.join(REPO, _folder))
 
+from fuzz_api import kind_of  # noqa: E402  (bench/ is on the path: this file's folder)
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import seed as hseed  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
@@ -40,17 +40,6 @@ import numpy as np  # noqa: E402
 import test_fuzz as fz  # noqa: E402
 
 import cog_id_ros  # noqa: E402
-
-
-def kind_of(exc):
-    if isinstance(exc, AssertionError):
-        text = str(exc).split('\n')[0]
-        text = re.sub(r'\d[\d.e+-]*', 'N', text)
-        return 'contract: ' + (text if len(text) <= 160 else text[:50] + ' ... ' + text[-110:])
-    tb = traceback.extract_tb(exc.__traceback__)
-    where = next((f'{os.path.basename(f.filename)}:{f.lineno}' for f in reversed(tb)
-                  if 'cog_id_ros' in f.filename), '?')
-    return f'{type(exc).__name__} at {where}: {str(exc)[:80]}'
 
 
 def main(argv=None):
