@@ -137,6 +137,14 @@ def sample(name, n=200):
     return _sample(name, int(n))
 
 
+@functools.lru_cache(maxsize=None)
+def oracle_along(name, n):
+    """(t, q, qd, qdd) of ``sample(name, n)`` and the oracle's q_all, qd_all, qdd_all and
+    torques along it (Oracle.follow), computed once per session."""
+    t, q, qd, qdd = sample(name, n)
+    return (t, q, qd, qdd) + tuple(oracle(name).follow(q, qd, qdd))
+
+
 # --------------------------------------------------------------------------- parallel robots
 # The Stewart-Gough platform and the delta robot are driven through their platform: a smooth
 # platform motion, and the actuator coordinates from inverse kinematics with exact first and

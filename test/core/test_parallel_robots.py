@@ -24,7 +24,7 @@ from trajectories import (  # noqa: E402
     TRAJECTORIES,
     config_path,
     delta_platform_motion,
-    sample,
+    oracle_along,
     stewart_platform_motion,
 )
 
@@ -43,14 +43,9 @@ RTOL = 1e-9
 @pytest.fixture(scope='module')
 def followed():
     """(t, q, qd, qdd, q_all, tau) of the oracle along each motion, computed once."""
-    cache = {}
-
     def get(name):
-        if name not in cache:
-            t, q, qd, qdd = sample(name, N_SAMPLES)
-            q_all, _, _, tau = Oracle(config_path(name)).follow(q, qd, qdd)
-            cache[name] = (t, q, qd, qdd, q_all, tau)
-        return cache[name]
+        t, q, qd, qdd, q_all, _, _, tau = oracle_along(name, N_SAMPLES)
+        return t, q, qd, qdd, q_all, tau
     return get
 
 

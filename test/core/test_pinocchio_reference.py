@@ -21,7 +21,7 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 from pinocchio_reference import Oracle, load_params, rpy_matrix, transform  # noqa: E402
-from trajectories import T_END, TRAJECTORIES, config_path, oracle, sample  # noqa: E402
+from trajectories import T_END, TRAJECTORIES, config_path, oracle, oracle_along, sample  # noqa: E402
 
 CONFIGS = sorted(os.path.basename(p) for p in glob.glob(os.path.join(REPO, 'config', '*.yaml')))
 WITH_TRAJ = [c for c in CONFIGS if c in TRAJECTORIES]
@@ -52,14 +52,7 @@ def _motion(jtype, axis, q):
 @pytest.fixture(scope='module')
 def followed():
     """Oracle positions/velocities/accelerations/torques along every config's motion."""
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            t, q, qd, qdd = sample(name, N_SAMPLES)
-            cache[name] = (t, q, qd, qdd) + tuple(oracle(name).follow(q, qd, qdd))
-        return cache[name]
-    return get
+    return lambda name: oracle_along(name, N_SAMPLES)
 
 
 # =========================================================================== part A: oracle
