@@ -204,15 +204,14 @@ class PythonKernels(ReferenceKernels):
 
 class NativeKernels(ReferenceKernels):
     """The kernels compiled from C (native.py): a library per mechanism, cached on disk by a
-    hash of the mechanism's parameters and of this package's core, so a cached mechanism
-    loads without tracing. N samples run the same C in a loop. Raises
+    hash of what the kernels are made of (:func:`kernel_key`), so a cached mechanism loads
+    without tracing. N samples run the same C in a loop. Raises
     native.NativeUnavailable when they cannot be had."""
     name = 'native'
 
     def __init__(self, mechanism):
         super().__init__(mechanism)
-        key = repr(sorted(mechanism.parameters.items())) + core_version()
-        module, self.operations = native.load_module(key, self._source)
+        module, self.operations = native.load_module(kernel_key(mechanism), self._source)
         module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
         self.prediction = module.prediction
         self.closure, self.dynamics = module.closure, module.dynamics
@@ -237,6 +236,16 @@ class NativeKernels(ReferenceKernels):
         return c_module_source(module, [(name, params, record.__name__, fields)
                                         for name, params, record, fields in
                                         trace(self.mechanism)])
+
+
+def kernel_key(mechanism):
+    """Everything a mechanism's kernels are made of, as text: the model as read (joints,
+    inertias, gravity, actuators, weights; the same whatever types the parameters came in,
+    e.g. rclpy's arrays, and whatever the initial positions) and the core's source."""
+    m = mechanism
+    return repr((m.joint_specs, m.link_mass, m.link_com, m.link_inertia, m.gravity,
+                 m.active_index, m.primary, m.free_joints, m.dof,
+                 m.torque_weights)) + core_version()
 
 
 def core_version():

@@ -191,3 +191,20 @@ def test_no_second_background_build_while_one_is_under_way(cache, monkeypatch):
     while glob.glob(str(cache / '*.lock')) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not glob.glob(str(cache / '*.lock')) and len(libraries(cache, 'O2')) == 1
+
+
+def test_the_same_model_from_other_parameter_types_shares_its_library(cache):
+    """The node declares the parameters through rclpy (double arrays come back as
+    array.array): the same mechanism must not be compiled again in every node process, nor
+    for other initial positions (the kernels do not depend on them)."""
+    import array
+    params = from_yaml('config/paper_four_bar_a.yaml')
+    cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(params), backend='native')
+    as_rclpy = {k: array.array('d', v) if isinstance(v, list) and v and
+                isinstance(v[0], float) else v for k, v in params.items()}
+    cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(as_rclpy),
+                               backend='native')
+    moved = dict(params, **{'mechanism.initial_positions':
+                            [1.6] + list(params['mechanism.initial_positions'][1:])})
+    cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(moved), backend='native')
+    assert len(libraries(cache)) == 1
