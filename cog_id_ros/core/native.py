@@ -2,8 +2,8 @@
 
 ``backend='native'`` (and ``'auto'`` where it can) writes the mechanism's two kernels as a
 CPython extension module (emitter.c_module_source), compiles it once and keeps the library
-in a cache directory keyed by a hash of what it is made of (the mechanism's parameters and
-the core's source, kernels.NativeKernels), the Python version and the flags:
+in a cache directory keyed by a hash of what it is made of (the mechanism's model as read and
+the core's source, kernels.kernel_key), the Python version, the flags and ``$CC`` if set:
 
 * the cache directory is ``$COG_ID_ROS_CACHE`` if set, else ``$XDG_CACHE_HOME/cog_id_ros``
   or ``~/.cache/cog_id_ros``; a cached library there is used even when the directory is
