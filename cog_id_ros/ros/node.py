@@ -429,8 +429,9 @@ class CogIdNode(Node):
             tau = np.array(efforts)
             if self.clip(tau):
                 efforts = tau.tolist()
-        # first the command: what control waits for
+        # first the command: what control waits for (the compute time ends with it)
         self.command_pub.publish(self.outputs.command_for(efforts))
+        self.compute_times.append(time.perf_counter() - start)
         self.effort_pub.publish(self.outputs.state_for(msg.header, received, v_used, efforts))
         self.filter.accept(stamp, q, v)
         self._stamp_rejections = 0
@@ -439,7 +440,6 @@ class CogIdNode(Node):
         self.last_was_rejected = False
         self.last_setpoint_time = time.monotonic()
         self.stream_stopped = False
-        self.compute_times.append(time.perf_counter() - start)
 
     def _positions_used(self, stamp, received):
         """The positions the setpoint is served at: unwrapped, checked for a jump.
