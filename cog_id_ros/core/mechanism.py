@@ -14,7 +14,7 @@ friends) so that finite, moderate setpoints never produce an infinite torque.
 """
 import itertools
 import math
-import os  # noqa: F401 (type hints)
+import os
 import re
 import warnings
 
@@ -115,11 +115,20 @@ class Mechanism:
         object.__setattr__(self, name, value)
 
     @classmethod
-    def from_parameters(cls, params: dict) -> 'Mechanism':
-        """From a dict of dotted parameter names (as rclpy gives them) or a nested dict."""
+    def from_parameters(cls, params: dict, base_dir: 'str | None' = None) -> 'Mechanism':
+        """From a dict of dotted parameter names (as rclpy gives them) or a nested dict.
+
+        A URDF form (``robot_description`` or ``mechanism.urdf_file`` with loop closures,
+        docs/urdf.md) is first turned into the native form by :mod:`cog_id_ros.urdf_input`
+        (file formats live outside the core); ``base_dir`` is where a relative
+        ``mechanism.urdf_file`` is looked for (default: the working directory)."""
         if not isinstance(params, dict):
             raise MechanismConfigError('parameters',
                                        f'must be a dict, got {type(params).__name__}')
+        flat = ParameterReader(params).params
+        if 'robot_description' in flat or 'mechanism.urdf_file' in flat:
+            from .. import urdf_input
+            return cls(urdf_input.native_parameters(flat, base_dir))
         return cls(params)
 
     @classmethod
@@ -129,9 +138,11 @@ class Mechanism:
 
         The file is read by :mod:`cog_id_ros.params_file` (the ROS conventions live outside
         the core); ``node_name`` is the node's name, ``cog_id_node`` (a test checks it is
-        params_file.DEFAULT_NODE_NAME)."""
+        params_file.DEFAULT_NODE_NAME). A relative ``mechanism.urdf_file`` is relative to
+        the file's directory."""
         from ..params_file import load_params_file
-        return cls(load_params_file(path, node_name))
+        return cls.from_parameters(load_params_file(path, node_name),
+                                   base_dir=os.path.dirname(os.path.abspath(path)))
 
     # --- reading ----------------------------------------------------------------------------
 
