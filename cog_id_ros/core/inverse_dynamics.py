@@ -7,7 +7,7 @@
 Successive calls keep the assembly branch: each is warm-started from the previous one.
 """
 import math
-from typing import NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -16,7 +16,8 @@ from . import spatial as sp
 from .batch import Batch, Evaluation, columns, pose_of, stacked
 from .cog_jacobian import cog_poses
 from .errors import CogIdError, MechanismConfigError, SetpointError
-from .inputs import check_values, one_sample, out_of_range, setpoint_arrays
+from .inputs import check_values, float_array, one_sample, out_of_range, setpoint_arrays
+from .joint_motion import active_velocity_map, combine
 from .kernels import kernels_for
 from .mechanism import Mechanism
 from .pipeline import cog_jacobians_at, cog_motion, equation_of_motion
@@ -118,6 +119,48 @@ class InverseDynamics:
         """Every joint coordinate (mechanism.joints order): (n_joints,) or (N, n_joints)."""
         at = self._poses(q, None)
         return self._moved_to(at, at.positions)
+
+    def solve_positions_by_name(self, q: ArrayLike) -> Dict[str, Union[float, np.ndarray]]:
+        """:meth:`solve_positions` keyed by joint name: {name: coordinate} for every joint of
+        mechanism.joints (a float for one sample, an (N,) array for a batch); the same
+        numbers, warm start and errors."""
+        positions = self.solve_positions(q)
+        if positions.ndim == 1:
+            return {name: float(x) for name, x in zip(self.mechanism.joints, positions)}
+        return {name: positions[:, j] for j, name in enumerate(self.mechanism.joints)}
+
+    def last_pose(self, qd: Optional[Sequence[float]] = None
+                  ) -> Tuple[List[float], Optional[List[float]]]:
+        """(q, qdot) of the closed pose the solver is at, read-only: nothing is solved again.
+
+        ``q``: every joint coordinate (mechanism.joints order, a list of floats) of the last
+        pose a call reached, which the next call starts from: after :meth:`sample_torques` or
+        :meth:`torques` on one sample, the pose its torques were computed at; after
+        :meth:`reset`, the assembled initial_positions. A call that raised leaves it where it
+        was. ``qdot``: with ``qd`` (M rates in active_joints order), the rates of every joint
+        there, qdot = S qd (README: the joint-rate map S of redundant actuation); None
+        without ``qd``.
+        """
+        m, (q, basis) = self.mechanism, self._state
+        if qd is None:
+            return list(q), None
+        n_act = len(m.active_joints)
+        rates = qd
+        if not (type(qd) is list and len(qd) == n_act and        # what the node passes
+                all(type(v) is float and math.isfinite(v) for v in qd)):
+            row = float_array('qd', qd, n_act)
+            if row.shape != (n_act,):
+                raise SetpointError(f'qd: expected shape ({n_act},) (active joints '
+                                    f'{m.active_joints}), got {row.shape}')
+            zeros = np.zeros((1, n_act))
+            _, errors = check_values(m, (), zeros, row[None], zeros, True)
+            if errors:
+                raise errors[0]
+            rates = row.tolist()
+        qdot = combine(active_velocity_map(m, basis, sp.ScalarOps), rates)
+        if not all(map(math.isfinite, qdot)):
+            raise out_of_range(rates, [], None)
+        return list(q), qdot
 
     def cog_poses(self, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray]:
         """g_i (eq. 1): (positions (..., n_links, 3), rotations (..., n_links, 3, 3))."""
