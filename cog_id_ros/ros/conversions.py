@@ -308,12 +308,17 @@ def effort_trajectory(msg, active_joints, q, qd, qdd, tau):
 
 
 class EffortMessages:
-    """Reusable output messages of the setpoint path (filled in place, then published)."""
+    """Reusable output messages of the setpoint path (filled in place, then published).
 
-    def __init__(self, active_joints):
+    ``joints``: every joint of the mechanism, the names of ``joint_states``.
+    """
+
+    def __init__(self, active_joints, joints=()):
         self.command = Float64MultiArray()
         self.state = JointState()
         self.state.name = list(active_joints)
+        self.pose = JointState()
+        self.pose.name = list(joints)
 
     def command_for(self, efforts):
         """effort_command for one setpoint (a list of floats)."""
@@ -328,6 +333,16 @@ class EffortMessages:
         state.velocity = velocities
         state.effort = efforts
         return state
+
+    def pose_for(self, frame_id, stamp_ns, positions, velocities):
+        """joint_states for one setpoint: every joint's position and velocity (lists of
+        floats; velocities may be empty), stamped ``stamp_ns``."""
+        pose = self.pose
+        pose.header.stamp.sec, pose.header.stamp.nanosec = divmod(stamp_ns, NANOSECONDS)
+        pose.header.frame_id = frame_id
+        pose.position = positions
+        pose.velocity = velocities
+        return pose
 
 
 def trajectory_process(conn, config):

@@ -16,6 +16,9 @@ QoS is :mod:`cog_id_ros.ros.topics`)
   one per accepted setpoint.
 * ``joint_effort`` (out, sensor_msgs/JointState): the same with names, the setpoint's
   header, its positions and the velocities used.
+* ``joint_states`` (out, sensor_msgs/JointState): every ``joint_states_decimation``-th
+  served setpoint, every joint of the mechanism at the closed pose the efforts were
+  computed at (positions and velocities), for robot_state_publisher and RViz.
 * ``effort_trajectory`` (out, trajectory_msgs/JointTrajectory): the trajectory, active
   joints only, with ``effort`` filled on every point.
 * ``/diagnostics`` (out, diagnostic_msgs/DiagnosticArray): counts, closure residual and
@@ -97,6 +100,7 @@ USAGE = f"""usage: {NODE_NAME} [-h] --ros-args --params-file FILE [-p NAME:=VALU
 
 Closed-link inverse dynamics as a ROS 2 node: JointState setpoints in on joint_setpoint,
 actuator efforts out on effort_command and joint_effort (one per accepted setpoint);
+the closed pose of every joint on joint_states (every joint_states_decimation-th one);
 whole trajectories in on joint_trajectory, out on effort_trajectory; counts and health
 on /diagnostics.
 
@@ -192,7 +196,9 @@ class CogIdNode(Node):
         self.report_solver = InverseDynamics(mech, backend=self.backend)   # for diagnostics
         self.filter = SetpointFilter(n_act, cfg['estimator_window'], cfg['max_setpoint_interval'])
         self.selector = JointSelector(self.active_joints)
-        self.outputs = EffortMessages(self.active_joints)
+        self.outputs = EffortMessages(self.active_joints, mech.joints)
+        self.joint_states_decimation = cfg['joint_states_decimation']
+        self._joint_states_countdown = 1      # served setpoints until the next joint_states
 
         # bookkeeping for diagnostics and the timeout
         self.counts = collections.Counter({'accepted': 0, 'trajectories_accepted': 0,
@@ -232,6 +238,10 @@ class CogIdNode(Node):
             self.effort_pub = self.create_publisher(
                 JointState, TOPICS['joint_effort'].name, control_qos(),
                 event_callbacks=lean, qos_overriding_options=qos_options())
+            self.joint_states_pub = None if not self.joint_states_decimation else \
+                self.create_publisher(
+                    JointState, TOPICS['joint_states'].name, control_qos(),
+                    event_callbacks=lean, qos_overriding_options=qos_options())
             self.trajectory_pub = self.create_publisher(
                 JointTrajectory, TOPICS['effort_trajectory'].name, control_qos(),
                 event_callbacks=lean, qos_overriding_options=qos_options())
@@ -440,6 +450,27 @@ class CogIdNode(Node):
         self.last_was_rejected = False
         self.last_setpoint_time = time.monotonic()
         self.stream_stopped = False
+        if self.joint_states_pub is not None:       # last: nothing waits for it
+            self._joint_states_countdown -= 1
+            if not self._joint_states_countdown:
+                self._joint_states_countdown = self.joint_states_decimation
+                try:
+                    self.publish_joint_states(msg.header.frame_id, stamp, v_used)
+                except Exception as exc:   # noqa: BLE001 (the setpoint was served: no rejection)
+                    self.counts['internal_errors'] += 1
+                    self._period_problems += 1
+                    self.warn_throttled('internal.joint_states', 'joint_states failed (the '
+                                        f'node goes on): {type(exc).__name__}: {exc}',
+                                        error=True)
+
+    def publish_joint_states(self, frame_id, stamp, rates):
+        """joint_states: the closed pose the solver served the setpoint at (every joint) and
+        the joint rates there from the active ``rates`` used, read from the core."""
+        try:
+            q, qdot = self.solver.last_pose(rates)
+        except CogIdError:      # rates too large for the joint rates: positions alone
+            q, qdot = self.solver.last_pose()[0], []
+        self.joint_states_pub.publish(self.outputs.pose_for(frame_id, stamp, q, qdot))
 
     def _positions_used(self, stamp, received):
         """The positions the setpoint is served at: unwrapped, checked for a jump.

@@ -254,6 +254,13 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'header alone, before it costs anything. 100,000 points take about 4-8 s '
                     'to solve on the reference VM'),
     NodeParameter(
+        'joint_states_decimation', 'int', 10, 'integer', low=0, high=1_000_000,
+        description='`joint_states` carries the closed pose of every Nth served setpoint '
+                    '(the first one of the node included); the default 10 is 100 Hz at a 1 kHz '
+                    'setpoint rate, enough for robot_state_publisher and RViz; 1: every one; '
+                    '0: no `joint_states` topic. Published after the command, so it never '
+                    'delays it'),
+    NodeParameter(
         'diagnostics_period', 'double', 1.0, 'number', unit='s', low=0.05, high=3600.0,
         description='s between `/diagnostics` messages'),
     NodeParameter(

@@ -62,6 +62,13 @@ TOPICS: dict[str, Topic] = {t.name: t for t in (
           "one per accepted setpoint: active joint names, the setpoint's header (stamp and "
           'frame, unchanged), the positions **as received** (not unwrapped) and the '
           'velocities used (given or estimated), the efforts'),
+    Topic('joint_states', 'sensor_msgs/JointState', 'out', _CONTROL,
+          'every `joint_states_decimation`-th accepted setpoint (none when 0): every joint of '
+          '`mechanism.joints` (revolute and prismatic, passive ones solved) by name, '
+          'positions of the closed pose the efforts were computed at and velocities '
+          '`qdot = S thetadot` (thetadot: the velocities used), stamped with the '
+          "setpoint's stamp (the receipt time when that is zero) and frame: for "
+          'robot_state_publisher and RViz'),
     Topic('effort_trajectory', 'trajectory_msgs/JointTrajectory', 'out', _CONTROL,
           'the received trajectory (same header, same `time_from_start`, positions as '
           'received), active joints only in `active_joints` order, with `effort` filled on '

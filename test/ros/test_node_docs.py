@@ -64,4 +64,5 @@ def test_one_default_node_name():
 
 def test_topic_table_names_the_node_topics():
     assert list(topics.TOPICS) == ['joint_setpoint', 'joint_trajectory', 'effort_command',
-                                   'joint_effort', 'effort_trajectory', '/diagnostics']
+                                   'joint_effort', 'joint_states', 'effort_trajectory',
+                                   '/diagnostics']
