@@ -151,12 +151,14 @@ def ups_layout(k, g=UPS):
     return base, plat
 
 
-def ups_platform(k=6, g=UPS, name=None):
+def ups_platform(k=6, g=UPS, name=None, spherical_closures=False):
     """Parameter dict of a platform on k UPS legs (see the module docstring); the joints of
     leg i are l<i>_u1, l<i>_u2 (U: about x, then y of a frame whose z is the leg's home
     direction), l<i>_p (prismatic along the leg, q = leg length - 0.8 m), l<i>_s1..s3 (S:
     about x, y, z; the platform-side frame is the leg's home frame, so the three angles are
-    0 at home, rounding aside)."""
+    0 at home, rounding aside). ``spherical_closures``: the S of legs 1..k-1 is one
+    ``spherical`` joint l<i>_s (no helper links, no coordinate); leg 0 keeps its three
+    revolute joints, the platform's path through the tree."""
     base, plat = ups_layout(k, g)
     home = np.array([0.0, 0.0, g['height']])
     p = {'mechanism.name': name or f'ups_platform_{k}', 'mechanism.gravity': [0.0, 0.0, -9.81],
@@ -180,8 +182,13 @@ def ups_platform(k=6, g=UPS, name=None):
         _joint(p, f'{leg}_u2', f'{leg}_cross', f'{leg}_lower', axis=(0.0, 1.0, 0.0))
         _joint(p, f'{leg}_p', f'{leg}_lower', f'{leg}_upper', 'prismatic',
                parent_xyz=(0.0, 0.0, g['lower_length']), child_xyz=(0.0, 0.0, -g['upper_length']))
-        sl, sj = _spherical(p, leg, f'{leg}_upper', 'platform', (0.0, 0.0, 0.0),
-                            plat[i], rpy)
+        if spherical_closures and i > 0:
+            _joint(p, f'{leg}_s', f'{leg}_upper', 'platform', 'spherical', child_xyz=plat[i])
+            del p[f'joints.{leg}_s.axis']
+            sl, sj = [], [f'{leg}_s']
+        else:
+            sl, sj = _spherical(p, leg, f'{leg}_upper', 'platform', (0.0, 0.0, 0.0),
+                                plat[i], rpy)
         links += [f'{leg}_cross', f'{leg}_lower', f'{leg}_upper'] + sl
         joints += [f'{leg}_u1', f'{leg}_u2', f'{leg}_p'] + sj
         active.append(f'{leg}_p')
@@ -193,7 +200,8 @@ def ups_platform(k=6, g=UPS, name=None):
     p['mechanism.links'] = links
     p['mechanism.joints'] = joints
     p['mechanism.active_joints'] = active
-    geometry = dict(base=base, platform=plat, frames=frames, home=home, g=g, k=k)
+    geometry = dict(base=base, platform=plat, frames=frames, home=home, g=g, k=k,
+                    spherical_closures=spherical_closures)
     p['mechanism.initial_positions'] = ups_ik(geometry, home, np.eye(3))
     return p, geometry
 
@@ -208,6 +216,8 @@ def ups_ik(geometry, position, rotation):
         length = float(np.linalg.norm(u))
         q1, q2, r_leg = universal_angles(rf, u / length)
         s = spherical_angles(r_leg.T @ rotation @ rf)
+        if geometry.get('spherical_closures') and out:
+            s = []                           # a spherical joint has no coordinate
         out += [q1, q2, length - g['lower_length'] - g['upper_length'], *s]
     return [float(x) for x in out]
 
@@ -365,8 +375,9 @@ def write_yaml(params, path, header=''):
     for jn in params['mechanism.joints']:
         lines.append(f'      {jn}:')
         for key in ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz',
-                    'child_rpy', 'axis'):
-            lines.append(f'        {key}: {_fmt(params[f"joints.{jn}.{key}"])}')
+                    'child_rpy', 'axis', 'axis2'):
+            if f'joints.{jn}.{key}' in params:
+                lines.append(f'        {key}: {_fmt(params[f"joints.{jn}.{key}"])}')
     with open(path, 'w', encoding='utf-8') as f:
         f.write('\n'.join(lines) + '\n')
 
@@ -435,11 +446,34 @@ DELTA_HEADER = """\
 """
 
 
+STEWART_SPHERICAL_HEADER = """\
+# Stewart-Gough platform 6-UPS with SPHERICAL JOINTS: config/stewart_6ups.yaml with the S of
+# legs 1-5 written as one `type: spherical` joint each (l<i>_s: the upper leg's origin, the S
+# centre, held at the platform point c_i) instead of three revolute joints through two
+# massless helper links. Written by bench/mechanism_family.py (ups_platform(6,
+# spherical_closures=True); `--write-configs` rewrites this file).
+# A spherical joint has no coordinate: it only closes a loop (3 equations: the two points
+# coincide), so it has no entry in initial_positions or any JointState, and no angle to lock.
+# Leg 0 keeps its three revolute S joints: the platform needs one path of joints with
+# coordinates to the base (docs/mechanism.md, "Spherical, universal and fixed joints"); its
+# middle angle stays within +-0.16 rad over the test motion.
+# The U joints stay two revolute joints through a massless cross: a U joint between the
+# base and a leg is on the leg's only path to the base (a universal joint that closes a loop
+# can be written as `type: universal`).
+# Same masses, geometry and test motion as stewart_6ups.yaml, hence the same torques.
+# DOF: 6 x 3 + 3 = 21 joint coordinates on 21 moving links; 5 loops of 3 equations:
+# 21 - 15 = 6.
+"""
+
+
 def write_examples():
     """Rewrite config/stewart_6ups.yaml and config/delta_3rus.yaml from the generators."""
     write_yaml(ups_platform(6, name='stewart_6ups')[0],
                os.path.join(REPO, 'config', 'stewart_6ups.yaml'), STEWART_HEADER)
     write_yaml(delta_robot()[0], os.path.join(REPO, 'config', 'delta_3rus.yaml'), DELTA_HEADER)
+    write_yaml(ups_platform(6, name='stewart_6ups_spherical', spherical_closures=True)[0],
+               os.path.join(REPO, 'config', 'stewart_6ups_spherical.yaml'),
+               STEWART_SPHERICAL_HEADER)
 
 
 # --------------------------------------------------------------------------- script mode

@@ -9,6 +9,7 @@ REASONS = {
     'malformed': 'wrong shape or type: not one number per active joint',
     'non_finite': 'NaN or infinity in a position, velocity or acceleration',
     'out_of_range': 'a finite value too large to compute with (the torques would overflow)',
+    'limit': "an active joint's position outside its limits (joints.<name>.lower / upper)",
     'closure': 'the loops cannot be closed at this pose',
     'singular': 'the pose is singular (closure Jacobian condition number too large)',
     'inconsistent': 'redundant actuation: the active coordinates disagree with the loop closure',
@@ -41,11 +42,11 @@ class MechanismConfigError(CogIdError, ValueError):
 class SetpointError(CogIdError, ValueError):
     """A setpoint that is malformed (wrong shape or type), not finite, or out of range.
 
-    ``reason``: 'malformed', 'non_finite' or 'out_of_range'.
+    ``reason``: 'malformed', 'non_finite', 'out_of_range' or 'limit'.
     """
 
     def __init__(self, message, sample=None, reason='malformed'):
-        assert reason in ('malformed', 'non_finite', 'out_of_range'), reason
+        assert reason in ('malformed', 'non_finite', 'out_of_range', 'limit'), reason
         self.sample = sample
         self.reason = reason
         super().__init__(message)

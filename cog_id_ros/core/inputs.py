@@ -3,7 +3,8 @@
 The input contract (README, "Python API"): ``q`` is required, ``qd`` and ``qdd`` default to
 zeros; one sample is (M,) (a plain number when M = 1), a batch (N, M); anything else is a
 SetpointError with reason 'malformed'; NaN or infinity 'non_finite'; a revolute actuator
-beyond +-MAX_ANGLE rad, or torques that overflow, 'out_of_range'.
+beyond +-MAX_ANGLE rad, or torques that overflow, 'out_of_range'; an actuator outside its
+position limits (``joints.<name>.lower`` / ``upper``, from a URDF's ``<limit>``) 'limit'.
 """
 import math
 
@@ -48,7 +49,8 @@ def one_sample(mechanism, wrapping, q, qd, qdd):
             len(q) == len(qd) == len(qdd) == m:  # what a control loop passes: checked at once
         every = q + qd + qdd
         if all(type(x) is float for x in every) and all(map(math.isfinite, every)) \
-                and all(-MAX_ANGLE <= q[a] <= MAX_ANGLE for a in wrapping):
+                and all(-MAX_ANGLE <= q[a] <= MAX_ANGLE for a in wrapping) \
+                and within_limits(mechanism, q):
             return q, qd, qdd
     out = []
     for value in (q, qd, qdd):
@@ -73,17 +75,26 @@ def one_sample(mechanism, wrapping, q, qd, qdd):
         if len(floats) != m or not all(map(math.isfinite, floats)):
             return None
         out.append(floats)
-    if not all(-MAX_ANGLE <= out[0][a] <= MAX_ANGLE for a in wrapping):
+    if not all(-MAX_ANGLE <= out[0][a] <= MAX_ANGLE for a in wrapping) or \
+            not within_limits(mechanism, out[0]):
         return None
     return out
 
 
-def check_values(mechanism, wrapping, q, qd, qdd, single):
-    """SetpointError for the first non-finite entry, or revolute position beyond
-    MAX_ANGLE; returns (per-sample bool array, {sample: error})."""
+def within_limits(mechanism, q):
+    """Every limited actuator of one sample (a list of floats) within its position limits."""
+    return all(lo <= q[a] <= hi for a, lo, hi in mechanism.limited_actuators)
+
+
+def check_values(mechanism, wrapping, q, qd, qdd, single, limits=True):
+    """SetpointError for the first non-finite entry, revolute position beyond MAX_ANGLE,
+    or actuator outside its position limits (unless not ``limits``); returns (per-sample
+    bool array, {sample: error})."""
     finite = (np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) &
               np.isfinite(qdd).all(axis=1))
     in_range = (np.abs(q[:, wrapping]) <= MAX_ANGLE).all(axis=1) if wrapping else finite
+    for a, lo, hi in mechanism.limited_actuators if limits else ():
+        in_range = in_range & (q[:, a] >= lo) & (q[:, a] <= hi)
     errors = {}
     for i in np.flatnonzero(~(finite & in_range)):
         where = '' if single else f'sample {i}: '
@@ -96,7 +107,16 @@ def check_values(mechanism, wrapping, q, qd, qdd, single):
                     f'finite', sample=int(i), reason='non_finite')
                 break
         else:
-            a = next(a for a in wrapping if not abs(q[i, a]) <= MAX_ANGLE)
+            a = next((a for a in wrapping if not abs(q[i, a]) <= MAX_ANGLE), None)
+            if a is None:
+                a, lo, hi = next(x for x in mechanism.limited_actuators
+                                 if not x[1] <= q[i, x[0]] <= x[2])
+                name = mechanism.active_joints[a]
+                errors[int(i)] = SetpointError(
+                    f'{where}q of {name} is {q[i, a]:.6g}, outside its position limits '
+                    f'[{lo:.6g}, {hi:.6g}] (joints.{name}.lower and upper, or the URDF '
+                    f'<limit>)', sample=int(i), reason='limit')
+                continue
             errors[int(i)] = SetpointError(
                 f'{where}q of {mechanism.active_joints[a]} is {q[i, a]:.6g} rad, beyond '
                 f'+-{MAX_ANGLE:g} rad (there a float no longer holds an angle to better than '

@@ -153,7 +153,7 @@ class InverseDynamics:
                 raise SetpointError(f'qd: expected shape ({n_act},) (active joints '
                                     f'{m.active_joints}), got {row.shape}')
             zeros = np.zeros((1, n_act))
-            _, errors = check_values(m, (), zeros, row[None], zeros, True)
+            _, errors = check_values(m, (), zeros, row[None], zeros, True, limits=False)
             if errors:
                 raise errors[0]
             rates = row.tolist()

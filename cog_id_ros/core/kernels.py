@@ -243,8 +243,8 @@ def kernel_key(mechanism):
     inertias, gravity, actuators, weights; the same whatever types the parameters came in,
     e.g. rclpy's arrays, and whatever the initial positions) and the core's source."""
     m = mechanism
-    return repr((m.joint_specs, m.link_mass, m.link_com, m.link_inertia, m.gravity,
-                 m.active_index, m.primary, m.free_joints, m.dof,
+    return repr((m.joint_specs, m.closure_specs, m.link_mass, m.link_com, m.link_inertia,
+                 m.gravity, m.active_index, m.primary, m.free_joints, m.dof,
                  m.torque_weights)) + core_version()
 
 

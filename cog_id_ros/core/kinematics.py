@@ -5,8 +5,10 @@ the order joints are listed); every other joint closes a loop. A tree joint may 
 either direction: the edge remembers a sign so that the joint coordinate keeps its meaning
 (motion of the joint's child attachment frame relative to its parent attachment frame).
 
-Every joint coordinate, tree or loop-closing, is a coordinate of the model; the loop-closing
-ones are tied to the others by the closure equations (closure.py).
+Every revolute or prismatic joint, tree or loop-closing, has a coordinate of the model; the
+loop-closing ones are tied to the others by the closure equations (closure.py). Spherical,
+universal and fixed joints have no coordinate: they always close a loop, and their closure
+equations hold the two attachment frames together (closure.py says how).
 """
 from collections import deque
 from dataclasses import dataclass, field
@@ -15,6 +17,11 @@ from . import spatial as sp
 from .errors import MechanismConfigError
 
 BASE = -1
+
+
+#: joint types with one coordinate, and those that only close loops (no coordinate)
+COORDINATE_TYPES = ('revolute', 'prismatic')
+CLOSURE_TYPES = ('spherical', 'universal', 'fixed')
 
 
 @dataclass
@@ -27,7 +34,13 @@ class JointSpec:
     parent_rpy: tuple
     child_xyz: tuple
     child_rpy: tuple
-    axis: tuple          # unit vector in the joint frame
+    axis: tuple          # unit vector in the joint frame (universal: parent attachment frame)
+    kind: str = ''       # one of COORDINATE_TYPES or CLOSURE_TYPES ('' : from ``revolute``)
+    axis2: tuple = ()    # universal: unit second axis in the child attachment frame
+
+    def __post_init__(self):
+        if not self.kind:
+            self.kind = 'revolute' if self.revolute else 'prismatic'
 
 
 @dataclass
@@ -57,8 +70,9 @@ class TreeEdge:
 
 @dataclass
 class LoopJoint:
-    """A loop-closing joint between its declared parent and child links."""
-    joint: int
+    """A loop-closing joint between its declared parent and child links. ``joint`` is its
+    coordinate, None for a spherical, universal or fixed joint (``kind``)."""
+    joint: 'int | None'
     parent: int
     child: int
     revolute: bool
@@ -70,14 +84,18 @@ class LoopJoint:
     r_cj: tuple
     t_cj: tuple
     cycle: list = field(default_factory=list)   # (tree joint, +1/-1): twist_child - twist_parent
+    kind: str = 'revolute'
+    name: str = ''
+    axis_c: tuple = ()   # universal: the second axis in the child link frame
 
 
 class KinematicModel:
     """The spanning tree and the loop-closing joints of a mechanism, ready to evaluate."""
 
-    def __init__(self, link_names, joints):
+    def __init__(self, link_names, joints, closures=()):
         self.link_names = list(link_names)
-        self.joints = list(joints)
+        self.joints = list(joints)            # joints with a coordinate
+        self.closures = list(closures)        # spherical, universal, fixed: loops only
         self.n_links = len(self.link_names)
         self.n_joints = len(self.joints)
         self.edges, self.loops = [], []
@@ -118,22 +136,29 @@ class KinematicModel:
                 queue.append(other)
         missing = [self.link_names[k] for k in range(self.n_links) if k not in up]
         if missing:
+            held = [c.name for c in self.closures
+                    if self.link_names.index(missing[0]) in (c.parent, c.child)]
             raise MechanismConfigError(
                 'mechanism.links',
-                f"link '{missing[0]}' is not connected to the base link by any chain of joints")
-        for j, spec in enumerate(self.joints):
-            if not in_tree[j]:
-                loop = _loop_joint(j, spec)
-                on_child, on_parent = _paths_below_common_ancestor(up, depth, spec.child,
-                                                                   spec.parent)
-                loop.cycle = [(i, 1.0) for i in on_child] + [(i, -1.0) for i in on_parent]
-                self.loops.append(loop)
+                f"link '{missing[0]}' is not connected to the base link by any chain of "
+                f'revolute or prismatic joints' + (
+                    f" (only by {', '.join(held)}: spherical, universal and fixed joints have "
+                    f'no coordinate and only close loops; connect the link by revolute or '
+                    f'prismatic joints, e.g. a universal joint as two revolute joints through '
+                    f'a massless link)' if held else ''))
+        closing = [(j, spec) for j, spec in enumerate(self.joints) if not in_tree[j]]
+        for j, spec in closing + [(None, spec) for spec in self.closures]:
+            loop = _loop_joint(j, spec)
+            on_child, on_parent = _paths_below_common_ancestor(up, depth, spec.child,
+                                                               spec.parent)
+            loop.cycle = [(i, 1.0) for i in on_child] + [(i, -1.0) for i in on_parent]
+            self.loops.append(loop)
         self.tree_joints = [e.joint for e in self.edges]
-        self.loop_joints = [lp.joint for lp in self.loops]
+        self.loop_joints = [lp.joint for lp in self.loops if lp.joint is not None]
         #: per joint, the indices of the loops whose closure equations it enters
         self.loops_of_joint = [[] for _ in range(self.n_joints)]
         for li, lp in enumerate(self.loops):
-            for j in [j for j, _ in lp.cycle] + [lp.joint]:
+            for j in loop_columns(lp):
                 self.loops_of_joint[j].append(li)
         self._orders = {}
 
@@ -198,12 +223,19 @@ def _tree_edge(j, spec, tree_parent, tree_child):
 
 
 def _loop_joint(j, spec):
-    r_pj = sp.rpy_matrix(spec.parent_rpy)
+    r_pj, r_cj = sp.rpy_matrix(spec.parent_rpy), sp.rpy_matrix(spec.child_rpy)
     k = sp.skew(spec.axis)
     return LoopJoint(j, spec.parent, spec.child, spec.revolute,
                      r_pj, sp.mat_mat(r_pj, k), sp.mat_mat(r_pj, sp.mat_mat(k, k)),
                      tuple(spec.parent_xyz), sp.mat_vec(r_pj, spec.axis),
-                     sp.rpy_matrix(spec.child_rpy), tuple(spec.child_xyz))
+                     r_cj, tuple(spec.child_xyz), kind=spec.kind, name=spec.name,
+                     axis_c=sp.mat_vec(r_cj, spec.axis2) if spec.axis2 else ())
+
+
+def loop_columns(loop):
+    """The joint coordinates a loop's closure equations depend on: its cycle through the
+    tree, and its own coordinate if it has one."""
+    return [j for j, _ in loop.cycle] + ([] if loop.joint is None else [loop.joint])
 
 
 class Frames:
@@ -271,8 +303,10 @@ def forward_kinematics(model, q, ops):
         axis = sp.scale(vector_to_base(frames, e.parent, e.axis_p), e.sign)
         xi[e.joint] = joint_twist(e.revolute, axis, point_to_base(frames, e.parent, e.origin_p))
     for lp in model.loops:
-        axis = vector_to_base(frames, lp.parent, lp.axis_p)
-        xi[lp.joint] = joint_twist(lp.revolute, axis, point_to_base(frames, lp.parent, lp.t_pj))
+        if lp.joint is not None:
+            axis = vector_to_base(frames, lp.parent, lp.axis_p)
+            xi[lp.joint] = joint_twist(lp.revolute, axis,
+                                       point_to_base(frames, lp.parent, lp.t_pj))
     return frames
 
 

@@ -24,7 +24,7 @@ from . import closure
 from . import kinematics as kin
 from . import spatial as sp
 from .errors import MechanismConfigError
-from .kinematics import BASE, JointSpec, KinematicModel
+from .kinematics import BASE, CLOSURE_TYPES, COORDINATE_TYPES, JointSpec, KinematicModel
 from .parameters import ParameterReader
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
@@ -32,8 +32,10 @@ MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joi
                   'max_condition_number', 'closure_tolerance')
 LINK_KEYS = ('mass', 'com', 'inertia')
 JOINT_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy',
-              'axis')
-JOINT_TYPES = ('revolute', 'prismatic')
+              'axis', 'axis2', 'lower', 'upper', 'effort')
+JOINT_TYPES = COORDINATE_TYPES + CLOSURE_TYPES
+#: how far from perpendicular (cosine) a universal joint's two axes may be written
+AXES_PERPENDICULAR = 1e-6
 
 DEFAULT_SETPOINT_TOLERANCE = 1e-3      # rad or m: larger redundant disagreements are rejected
 DEFAULT_MAX_CONDITION_NUMBER = 1e6     # closure Jacobian (passive joints), Frobenius norm
@@ -91,8 +93,9 @@ class Mechanism:
         self._read_mechanism(reader)
         self._read_links(reader)
         self._read_joints(reader)
+        self._read_positions(reader)
         self._reject_unknown(reader)
-        self.model = KinematicModel(self.links, self.joint_specs)
+        self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs)
         try:
             self._assemble()
             self._count_degrees_of_freedom()
@@ -151,14 +154,14 @@ class Mechanism:
         self.gravity = r.vector('mechanism.gravity', 3, default=(0.0, 0.0, -9.81))
         self.base_link = r.string('mechanism.base_link', default='ground')
         self.links = r.string_list('mechanism.links', required=True)
-        self.joints = r.string_list('mechanism.joints', required=True)
+        self.declared_joints = r.string_list('mechanism.joints', required=True)
         self.active_joints = r.string_list('mechanism.active_joints', required=True)
-        _check_sizes(self.links, self.joints, self.active_joints)
+        _check_sizes(self.links, self.declared_joints, self.active_joints)
         _check_names('mechanism.links', 'link', self.links)
-        _check_names('mechanism.joints', 'joint', self.joints)
+        _check_names('mechanism.joints', 'joint', self.declared_joints)
         if not self.links:
             raise MechanismConfigError('mechanism.links', 'must name at least one moving link')
-        if not self.joints:
+        if not self.declared_joints:
             raise MechanismConfigError('mechanism.joints', 'must name at least one joint')
         if not self.active_joints:
             raise MechanismConfigError('mechanism.active_joints', 'must name at least one joint')
@@ -167,7 +170,7 @@ class Mechanism:
                 'mechanism.links',
                 f"the base link '{self.base_link}' must not be listed: it does not move")
         for name in self.active_joints:
-            if name not in self.joints:
+            if name not in self.declared_joints:
                 raise MechanismConfigError(
                     'mechanism.active_joints', f"'{name}' is not in mechanism.joints")
         gravity_norm = math.hypot(*self.gravity)
@@ -175,11 +178,7 @@ class Mechanism:
             raise MechanismConfigError(
                 'mechanism.gravity', f'must be at most {MAX_GRAVITY:g} m/s^2 long, got '
                                      f'{list(self.gravity)} ({gravity_norm:.6g} m/s^2)')
-        n, m = len(self.joints), len(self.active_joints)
-        self.initial_positions = _bounded(
-            'mechanism.initial_positions',
-            r.vector('mechanism.initial_positions', n, default=(0.0,) * n),
-            MAX_COORDINATE, 'rad or m')
+        m = len(self.active_joints)
         self.torque_weights = r.vector('mechanism.torque_weights', m, default=(1.0,) * m)
         for k, w in enumerate(self.torque_weights):
             if w <= 0.0:
@@ -228,15 +227,19 @@ class Mechanism:
             self.link_inertia.append(_inertia(r, prefix + 'inertia'))
 
     def _read_joints(self, r):
-        self.joint_types, self.joint_specs = [], []
+        """Every joint of mechanism.joints: those with a coordinate (revolute, prismatic:
+        ``joints``, ``joint_specs``) and those that only close loops (spherical, universal,
+        fixed: ``closure_joints``, ``closure_specs``)."""
+        self.joint_types, self.joint_specs, self.closure_specs = [], [], []
+        self.position_limits, self.joint_efforts = [], []
         known = {name: k for k, name in enumerate(self.links)}
         known[self.base_link] = BASE
-        for joint in self.joints:
+        for joint in self.declared_joints:
             prefix = f'joints.{joint}.'
             kind = r.string(prefix + 'type', required=True)
             if kind not in JOINT_TYPES:
                 raise MechanismConfigError(
-                    prefix + 'type', f"must be 'revolute' or 'prismatic', got {kind!r}")
+                    prefix + 'type', f"must be one of {', '.join(JOINT_TYPES)}, got {kind!r}")
             ends = []
             for side in ('parent', 'child'):
                 link = r.string(prefix + side, required=True)
@@ -248,12 +251,18 @@ class Mechanism:
                 ends.append(known[link])
             if ends[0] == ends[1]:
                 raise MechanismConfigError(prefix + 'child', 'must differ from the parent link')
-            axis = r.vector(prefix + 'axis', 3, default=(0.0, 0.0, 1.0))
-            norm = math.hypot(*axis)     # no overflow near 1e308, no underflow near 1e-308
-            if not norm > 0.0:
-                raise MechanismConfigError(prefix + 'axis',
-                                           f'must not be zero-length, got {list(axis)}')
-            self.joint_types.append(kind)
+            axis = axis2 = (0.0, 0.0, 1.0)
+            if kind in ('revolute', 'prismatic', 'universal'):
+                axis = _unit_axis(r, prefix + 'axis', (0.0, 0.0, 1.0))
+            if kind == 'universal':
+                axis2 = _unit_axis(r, prefix + 'axis2', None)
+                if abs(sum(a * b for a, b in zip(axis, axis2))) > AXES_PERPENDICULAR:
+                    raise MechanismConfigError(
+                        prefix + 'axis2',
+                        f'must be perpendicular to axis (a universal joint keeps its two axes '
+                        f'perpendicular; they are written in the parent and child attachment '
+                        f'frames, which coincide at rest), got axis {list(axis)} and axis2 '
+                        f'{list(axis2)}')
             offsets = {}
             for key, bound, unit in (('parent_xyz', MAX_LENGTH, 'm'),
                                      ('parent_rpy', MAX_COORDINATE, 'rad'),
@@ -261,21 +270,84 @@ class Mechanism:
                                      ('child_rpy', MAX_COORDINATE, 'rad')):
                 value = r.vector(prefix + key, 3, default=(0.0, 0.0, 0.0))
                 offsets[key] = _bounded(prefix + key, value, bound, unit)
-            self.joint_specs.append(JointSpec(
-                name=joint, revolute=(kind == 'revolute'), parent=ends[0], child=ends[1],
-                axis=tuple(a / norm for a in axis), **offsets))
+            spec = JointSpec(name=joint, revolute=(kind == 'revolute'), parent=ends[0],
+                             child=ends[1], axis=axis, kind=kind,
+                             axis2=axis2 if kind == 'universal' else (), **offsets)
+            if kind in CLOSURE_TYPES:
+                self.closure_specs.append(spec)
+                continue
+            self.joint_types.append(kind)
+            self.joint_specs.append(spec)
+            lower, upper, effort = (r.number(prefix + key) for key in ('lower', 'upper',
+                                                                        'effort'))
+            lower = -math.inf if lower is None else lower
+            upper = math.inf if upper is None else upper
+            if not lower < upper:
+                raise MechanismConfigError(prefix + 'upper',
+                                           f'must be above lower ({lower!r}), got {upper!r}')
+            self.position_limits.append((lower, upper))
+            effort = math.inf if effort is None else effort
+            if not effort > 0.0:
+                raise MechanismConfigError(prefix + 'effort',
+                                           f'must be positive (N m or N), got {effort!r}')
+            self.joint_efforts.append(effort)
+        self.joints = [spec.name for spec in self.joint_specs]
+        self.closure_joints = [spec.name for spec in self.closure_specs]
+
+    def _read_positions(self, r):
+        """initial_positions (one per revolute or prismatic joint); the actuators, which
+        must have a coordinate, and their effort limits."""
+        for name in self.active_joints:
+            if name in self.closure_joints:
+                kind = self.closure_specs[self.closure_joints.index(name)].kind
+                raise MechanismConfigError(
+                    'mechanism.active_joints',
+                    f"'{name}' is a {kind} joint: spherical, universal and fixed joints are "
+                    f'passive (only revolute and prismatic joints can be driven)')
+        n = len(self.joints)
+        values = r.vector('mechanism.initial_positions', None, default=(0.0,) * n)
+        if len(values) != n:
+            extra = (f' ({len(self.closure_joints)} of mechanism.joints are spherical, '
+                     f'universal or fixed and have none)' if self.closure_joints else '')
+            raise MechanismConfigError(
+                'mechanism.initial_positions',
+                f'must have {n} entries, one per revolute or prismatic joint of '
+                f'mechanism.joints{extra}, got {len(values)}')
+        self.initial_positions = _bounded('mechanism.initial_positions', values,
+                                          MAX_COORDINATE, 'rad or m')
+        index = {name: k for k, name in enumerate(self.joints)}
+        #: per active joint: (lower, upper) position limits and the effort limit (inf: none)
+        self.active_position_limits = [self.position_limits[index[a]]
+                                       for a in self.active_joints]
+        self.effort_limits = [self.joint_efforts[index[a]] for a in self.active_joints]
+        #: (index into active_joints, lower, upper) of every actuator with a position limit
+        self.limited_actuators = [(a, lo, hi) for a, (lo, hi) in
+                                  enumerate(self.active_position_limits)
+                                  if lo > -math.inf or hi < math.inf]
 
     def _reject_unknown(self, r):
         for name in r.unused('mechanism.'):
             raise MechanismConfigError(
                 name, f"unknown parameter (mechanism.* takes {', '.join(MECHANISM_KEYS)})")
+        kinds = {spec.name: spec.kind for spec in self.joint_specs + self.closure_specs}
         for group, names, keys in (('links', self.links, LINK_KEYS),
-                                   ('joints', self.joints, JOINT_KEYS)):
+                                   ('joints', self.declared_joints, JOINT_KEYS)):
             for name in r.unused(group + '.'):
                 parts = name.split('.')
                 if len(parts) < 3 or parts[1] not in names:
                     raise MechanismConfigError(
                         name, f"unknown {group[:-1]} '{parts[1]}' (not in mechanism.{group})")
+                kind = kinds.get(parts[1]) if group == 'joints' else None
+                why = None
+                if kind in CLOSURE_TYPES and parts[2] in ('lower', 'upper', 'effort'):
+                    why = 'has no coordinate, so no position or effort limits'
+                elif kind in ('spherical', 'fixed') and parts[2] in ('axis', 'axis2'):
+                    why = 'has no axis'
+                elif kind in COORDINATE_TYPES and parts[2] == 'axis2':
+                    why = 'has one axis (axis2 is the second axis of a universal joint)'
+                if why:
+                    raise MechanismConfigError(name, f'not a parameter of a {kind} joint: '
+                                                     f'a {kind} joint {why}')
                 raise MechanismConfigError(
                     name, f"unknown parameter ({group}.{parts[1]}.* takes {', '.join(keys)})")
 
@@ -335,8 +407,8 @@ class Mechanism:
             residuals = [max(map(abs, st.residual)) for st in states]
         out = []
         for lp, res in zip(self.model.loops, residuals):
-            joints = sorted({j for j, _ in lp.cycle} | {lp.joint})
-            out.append((lp.joint, [self.joints[j] for j in joints], res))
+            joints = [self.joints[j] for j in sorted(set(kin.loop_columns(lp)))]
+            out.append((lp.name, joints + ([lp.name] if lp.joint is None else []), res))
         return out
 
     def _check_loops_hint(self, q, joints=None):
@@ -346,9 +418,9 @@ class Mechanism:
         names = {self.joints[j] for j in joints or ()}
         bad = ([lp for lp in loops if lp[2] is not None and lp[2] >= self.closure_tolerance]
                or [lp for lp in loops if names & set(lp[1])] or loops)
-        which = '; '.join(f"loop closed by '{self.joints[j]}' (joints {', '.join(js)}"
+        which = '; '.join(f"loop closed by '{name}' (joints {', '.join(js)}"
                           + (f', residual {res:.3g})' if res is not None else ')')
-                          for j, js, res in bad[:5])
+                          for name, js, res in bad[:5])
         more = f' and {len(bad) - 5} more loops' if len(bad) > 5 else ''
         return (f'check the geometry (parent_xyz, child_xyz, *_rpy and axis) of the joints of '
                 f'{which}{more}, and initial_positions (the assembly mode)')
@@ -479,6 +551,16 @@ def _inertia(r, name):
             name, f'violates the triangle inequality of principal moments '
                   f'({moments[0]:.6g} + {moments[1]:.6g} < {moments[2]:.6g})')
     return tuple(float(x) for x in matrix.ravel())
+
+
+def _unit_axis(r, name, default):
+    """A joint axis as a unit vector; MechanismConfigError for a missing (``default`` None)
+    or zero-length one."""
+    axis = r.vector(name, 3, default=default, required=default is None)
+    norm = math.hypot(*axis)     # no overflow near 1e308, no underflow near 1e-308
+    if not norm > 0.0:
+        raise MechanismConfigError(name, f'must not be zero-length, got {list(axis)}')
+    return tuple(a / norm for a in axis)
 
 
 def _condition_number(a):

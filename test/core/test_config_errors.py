@@ -32,7 +32,7 @@ CASES = [
     ('links.link1.mas', 'unknown parameter', {'links.link1.mas': 1.0}),
     ('links.link9.mass', "unknown link 'link9'", {'links.link9.mass': 1.0}),
     ('joints.joint2.axis', 'zero-length', {'joints.joint2.axis': [0, 0, 0]}),
-    ('joints.joint2.type', "must be 'revolute' or 'prismatic', got 'ball'", {'joints.joint2.type': 'ball'}),
+    ('joints.joint2.type', "must be one of revolute, prismatic, spherical, universal, fixed, got 'ball'", {'joints.joint2.type': 'ball'}),
     ('joints.joint2.type', 'missing', {'joints.joint2.type': None}),
     ('joints.joint2.child', "unknown link 'lnk2'", {'joints.joint2.child': 'lnk2'}),
     ('joints.joint2.child', 'must differ from the parent', {'joints.joint2.child': 'link1'}),
