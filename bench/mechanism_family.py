@@ -238,11 +238,12 @@ def delta_arm_angle(g, phi, pos):
     return math.atan2(z, a) + math.acos(k / (2.0 * g['arm'] * rho))
 
 
-def delta_robot(g=DELTA, name='delta_3rus'):
+def delta_robot(g=DELTA, name='delta_3rus', spherical_closures=False):
     """Parameter dict of the delta robot (module docstring). Leg i at azimuth 120 i deg:
     l<i>_arm_joint (active, about the leg frame's y: positive = arm down), rods r<i>a, r<i>b
     each with a U (about x then y of a frame whose x is the elbow axis and z the rod's home
-    direction) at the elbow and an S at the platform."""
+    direction) at the elbow and an S at the platform. ``spherical_closures``: the S of every
+    rod but r0a is one ``spherical`` joint r<i><s>_s (no helper links, no coordinate)."""
     p = {'mechanism.name': name, 'mechanism.gravity': [0.0, 0.0, -9.81],
          'mechanism.base_link': 'ground'}
     links, joints, active, legs = [], [], [], []
@@ -279,8 +280,14 @@ def delta_robot(g=DELTA, name='delta_3rus'):
             _joint(p, f'{rod}_u1', arm, f'{rod}_cross', parent_xyz=top_local,
                    parent_rpy=att_rpy, axis=(1.0, 0.0, 0.0))
             _joint(p, f'{rod}_u2', f'{rod}_cross', rod, axis=(0.0, 1.0, 0.0))
-            sl, sj = _spherical(p, rod, rod, 'platform', (0.0, 0.0, g['rod']),
-                                plat_local, rod_rpy)
+            if spherical_closures and rod != 'r0a':
+                _joint(p, f'{rod}_s', rod, 'platform', 'spherical',
+                       parent_xyz=(0.0, 0.0, g['rod']), child_xyz=plat_local)
+                del p[f'joints.{rod}_s.axis']
+                sl, sj = [], [f'{rod}_s']
+            else:
+                sl, sj = _spherical(p, rod, rod, 'platform', (0.0, 0.0, g['rod']),
+                                    plat_local, rod_rpy)
             links += [f'{rod}_cross', rod] + sl
             joints += [f'{rod}_u1', f'{rod}_u2'] + sj
             rods.append(dict(top=top_local, plat=plat_local, att=att_rpy, crpy=rod_rpy))
@@ -291,7 +298,7 @@ def delta_robot(g=DELTA, name='delta_3rus'):
     p['mechanism.links'] = links
     p['mechanism.joints'] = joints
     p['mechanism.active_joints'] = active
-    geometry = dict(g=g, legs=legs, home=home)
+    geometry = dict(g=g, legs=legs, home=home, spherical_closures=spherical_closures)
     p['mechanism.initial_positions'] = delta_ik(geometry, home)
     return p, geometry
 
@@ -308,6 +315,8 @@ def delta_ik(geometry, pos):
             d = pos + rod['plat'] - (leg['pivot'] + r_arm @ rod['top'])
             q1, q2, r_rod = universal_angles(r_arm @ rpy_matrix(rod['att']), d / np.linalg.norm(d))
             s = spherical_angles(r_rod.T @ rpy_matrix(rod['crpy']))
+            if geometry.get('spherical_closures') and len(out) > 3:
+                s = []                       # a spherical joint has no coordinate (not r0a)
             out += [q1, q2, *s]
     return [float(x) for x in out]
 
@@ -466,6 +475,23 @@ STEWART_SPHERICAL_HEADER = """\
 """
 
 
+DELTA_SPHERICAL_HEADER = """\
+# Delta robot with SPHERICAL JOINTS: config/delta_3rus.yaml with the S of every rod but r0a
+# written as one `type: spherical` joint (r<i><s>_s: the rod's far end held at its platform
+# point) instead of three revolute joints through two massless helper links. Written by
+# bench/mechanism_family.py (delta_robot(spherical_closures=True); `--write-configs`
+# rewrites this file).
+# A spherical joint has no coordinate: it only closes a loop (3 equations), so it has no
+# entry in initial_positions or any JointState, and no angle to lock. Rod r0a keeps its three
+# revolute S joints: the platform needs one path of joints with coordinates to the base.
+# The U joints at the elbows stay two revolute joints through a massless cross (each is on
+# its rod's only path to the base).
+# Same masses, geometry and test motion as delta_3rus.yaml, hence the same torques.
+# DOF: 3 arm joints + 6 U joints x 2 + the 3 S joints of r0a = 18 joint coordinates on 18
+# moving links; 5 spherical joints close 5 loops of 3 equations: 18 - 15 = 3.
+"""
+
+
 def write_examples():
     """Rewrite config/stewart_6ups.yaml and config/delta_3rus.yaml from the generators."""
     write_yaml(ups_platform(6, name='stewart_6ups')[0],
@@ -474,6 +500,8 @@ def write_examples():
     write_yaml(ups_platform(6, name='stewart_6ups_spherical', spherical_closures=True)[0],
                os.path.join(REPO, 'config', 'stewart_6ups_spherical.yaml'),
                STEWART_SPHERICAL_HEADER)
+    write_yaml(delta_robot(name='delta_3rus_spherical', spherical_closures=True)[0],
+               os.path.join(REPO, 'config', 'delta_3rus_spherical.yaml'), DELTA_SPHERICAL_HEADER)
 
 
 # --------------------------------------------------------------------------- script mode

@@ -278,6 +278,6 @@ TRAJECTORIES[DELTA] = _platform_driven(DELTA, _delta)
 #: configs that describe the mechanism of another config differently (same actuators, same
 #: motion): test/core/test_closure_joints.py checks them against it, the oracle does not
 #: read them (it knows revolute and prismatic joints only)
-TWINS = {'stewart_6ups_spherical.yaml': STEWART}
+TWINS = {'stewart_6ups_spherical.yaml': STEWART, 'delta_3rus_spherical.yaml': DELTA}
 for _twin, _original in TWINS.items():
     TRAJECTORIES[_twin] = TRAJECTORIES[_original]

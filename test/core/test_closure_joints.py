@@ -6,7 +6,7 @@ carry no mass, so the two descriptions are one mechanism.
 """
 import numpy as np
 import pytest
-from trajectories import STEWART, config_path, sample
+from trajectories import TWINS, config_path, sample
 
 import cog_id_ros
 from cog_id_ros.params_file import load_params_file
@@ -79,12 +79,14 @@ def test_a_joint_without_coordinate_gives_the_torques_of_its_helper_links(make, 
                   - expected).max() < 1e-8 * scale
 
 
-def test_the_stewart_platform_with_spherical_joints_matches_the_helper_link_one():
-    _, q, qd, qdd = sample(STEWART, 100)
-    helper = cog_id_ros.Mechanism.from_params_file(config_path(STEWART))
-    native = cog_id_ros.Mechanism.from_params_file(config_path('stewart_6ups_spherical.yaml'))
-    assert native.closure_joints == [f'l{i}_s' for i in range(1, 6)]
-    assert len(native.joints) == 21 and native.dof == 6
+@pytest.mark.parametrize('twin', sorted(TWINS))
+def test_parallel_robots_with_spherical_joints_match_the_helper_link_ones(twin):
+    original = TWINS[twin]
+    _, q, qd, qdd = sample(original, 100)
+    helper = cog_id_ros.Mechanism.from_params_file(config_path(original))
+    native = cog_id_ros.Mechanism.from_params_file(config_path(twin))
+    assert len(native.closure_joints) == 5 and native.dof == helper.dof
+    assert len(native.joints) == len(helper.joints) - 15
     expected = cog_id_ros.InverseDynamics(helper, backend='python').torques(q, qd, qdd)
     for backend in BACKENDS:
         got = cog_id_ros.InverseDynamics(native, backend=backend).torques(q, qd, qdd)
