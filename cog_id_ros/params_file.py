@@ -6,11 +6,17 @@ apply first and the node's own entry overrides them. Nested mappings become dott
 (``links.link1.mass``), exactly the names rclpy gives the node, so the dict this returns
 feeds ``Mechanism.from_parameters`` (which is what ``Mechanism.from_params_file`` does).
 
-The file is read as strictly as rcl reads it (a key written twice is an error, floats may
-be written without a dot) and defensively: only regular files of at most
-``MAX_FILE_CHARS``, no FIFOs, no deeply nested flow collections, no recursive aliases.
-Whatever the file holds, only MechanismConfigError comes out of here, naming the parameter
-or ``params_file``, in time proportional to the size of the file.
+The file is read as strictly as rcl reads it (floats may be written without a dot; a key
+written twice is an error here, where rcl lets the last one win) and defensively: only
+regular files of at most ``MAX_FILE_CHARS``, no FIFOs, no deeply nested flow collections,
+no recursive aliases. An array rcl's parser refuses makes the file an error here too,
+naming the parameter (:func:`rcl_value_problem`: an array that mixes integers and doubles,
+``[0, -9.81, 0]``, or other types), in any node entry, as rcl refuses the whole file:
+cog_id_node and the API accept the same files (the node checks its ``--params-file``s with
+:func:`check_rcl_values` before rcl reads them). Only files: a dict given to
+``Mechanism.from_parameters`` may mix integers and floats freely. Whatever the file holds,
+only MechanismConfigError comes out of here, naming the parameter or ``params_file``, in
+time proportional to the size of the file.
 """
 import os
 import re
@@ -48,41 +54,10 @@ def _entry_matches(entry, node_name):
 
 def load_params_file(path, node_name=DEFAULT_NODE_NAME):
     """Dotted-name dict of the parameters a node called ``node_name`` gets from ``path``."""
-    if not isinstance(path, (str, os.PathLike)):    # an int would be taken as a descriptor
-        raise MechanismConfigError(
-            'params_file', f'must be a path to a file, got {type(path).__name__} {show(path)}')
     if not isinstance(node_name, str):
         raise MechanismConfigError('node_name', f'must be a string, got {show(node_name)}')
-    try:
-        if not stat.S_ISREG(os.stat(path).st_mode):     # a FIFO would block the reader
-            raise MechanismConfigError('params_file', f'{path} is not a regular file')
-        with open(path, encoding='utf-8') as stream:
-            text = stream.read(MAX_FILE_CHARS + 1)
-        if len(text) > MAX_FILE_CHARS:
-            raise MechanismConfigError(
-                'params_file', f'{path} is larger than the supported {MAX_FILE_CHARS // 1024} kB; '
-                               f'a mechanism within the size limits (docs/mechanism.md) takes '
-                               f'far less: keep the mechanism in a file of its own')
-        _check_flow_depth(path, text)
-        document = yaml.load(text, Loader=ParamsLoader)   # noqa: S506 (a safe loader)
-    except MechanismConfigError:
-        raise
-    except OSError as exc:
-        raise MechanismConfigError(
-            'params_file', f'cannot read {path}: {exc.strerror or exc}') from exc
-    except UnicodeDecodeError as exc:
-        raise MechanismConfigError(
-            'params_file', f'{path} is not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at '
-                           f'offset {exc.start}); save it with UTF-8 encoding') from None
-    except yaml.YAMLError as exc:
-        raise MechanismConfigError('params_file', f'{path} is not valid YAML: {exc}') from exc
-    except RecursionError:
-        raise MechanismConfigError(
-            'params_file', f'{path} is nested too deeply to read; the mechanism parameters '
-                           f'are three levels deep under ros__parameters') from None
-    except (ValueError, OverflowError) as exc:   # e.g. a YAML timestamp out of range
-        raise MechanismConfigError(
-            'params_file', f'{path} holds a value YAML cannot represent: {exc}') from None
+    document = read_document(path)
+    check_rcl_values(document, path)
     if not isinstance(document, dict):
         raise MechanismConfigError('params_file', f'{path} holds no node entries')
     wildcard, own = {}, {}
@@ -101,6 +76,92 @@ def load_params_file(path, node_name=DEFAULT_NODE_NAME):
     merged = dict(wildcard)
     merged.update(own)
     return merged
+
+
+def read_document(path, duplicate_keys=False):
+    """The YAML document of the parameter file ``path``, read defensively (see the module
+    docstring), numbers as rcl reads them. A key written twice in one mapping is an error
+    unless ``duplicate_keys`` (rcl lets the last one win: the node's check of its files).
+    MechanismConfigError('params_file', ...) when it cannot be read."""
+    if not isinstance(path, (str, os.PathLike)):    # an int would be taken as a descriptor
+        raise MechanismConfigError(
+            'params_file', f'must be a path to a file, got {type(path).__name__} {show(path)}')
+    loader = RclLoader if duplicate_keys else ParamsLoader
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):     # a FIFO would block the reader
+            raise MechanismConfigError('params_file', f'{path} is not a regular file')
+        with open(path, encoding='utf-8') as stream:
+            text = stream.read(MAX_FILE_CHARS + 1)
+        if len(text) > MAX_FILE_CHARS:
+            raise MechanismConfigError(
+                'params_file', f'{path} is larger than the supported {MAX_FILE_CHARS // 1024} kB; '
+                               f'a mechanism within the size limits (docs/mechanism.md) takes '
+                               f'far less: keep the mechanism in a file of its own')
+        _check_flow_depth(path, text)
+        return yaml.load(text, Loader=loader)   # noqa: S506 (a safe loader)
+    except MechanismConfigError:
+        raise
+    except OSError as exc:
+        raise MechanismConfigError(
+            'params_file', f'cannot read {path}: {exc.strerror or exc}') from exc
+    except UnicodeDecodeError as exc:
+        raise MechanismConfigError(
+            'params_file', f'{path} is not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at '
+                           f'offset {exc.start}); save it with UTF-8 encoding') from None
+    except yaml.YAMLError as exc:
+        raise MechanismConfigError('params_file', f'{path} is not valid YAML: {exc}') from exc
+    except RecursionError:
+        raise MechanismConfigError(
+            'params_file', f'{path} is nested too deeply to read; the mechanism parameters '
+                           f'are three levels deep under ros__parameters') from None
+    except (ValueError, OverflowError) as exc:   # e.g. a YAML timestamp out of range
+        raise MechanismConfigError(
+            'params_file', f'{path} holds a value YAML cannot represent: {exc}') from None
+
+
+def check_rcl_values(document, path):
+    """MechanismConfigError naming the first parameter, in any node entry of ``document``
+    (from :func:`read_document`), whose value rcl's parameter-file parser refuses
+    (:func:`rcl_value_problem`); rcl refuses the whole file for it, whichever node the
+    entry is for. Entries rcl would refuse for their shape are left to the caller."""
+    if not isinstance(document, dict):
+        return
+    for body in document.values():
+        params = body.get('ros__parameters') if isinstance(body, dict) else None
+        if not isinstance(params, dict):
+            continue
+        try:
+            flat = flatten(params, source='params_file')   # (bounded: aliases, depth)
+        except MechanismConfigError:
+            continue        # refused by whoever reads this entry (load_params_file, rclpy)
+        for name, value in flat.items():
+            problem = rcl_value_problem(value)
+            if problem:
+                raise MechanismConfigError(name, f'{problem} (in {path})')
+
+
+def rcl_value_problem(value):
+    """Why rcl's parameter-file parser refuses ``value`` (as read from YAML), or None.
+
+    The one rule, for cog_id_node and the API alike: an array is one type. rcl refuses an
+    array that mixes integers and doubles (``[0, -9.81, 0]``) or other types; arrays of
+    integers alone are fine where doubles are meant (``[0, 0, 1]``). Only what rcl is known
+    to refuse: cog_id_node names anything else rcl refuses by its line.
+    """
+    if not isinstance(value, list) or not all(
+            isinstance(item, (bool, int, float, str)) for item in value):
+        return None
+    kinds = set()
+    for item in value:
+        kinds.add(bool if isinstance(item, bool) else int if isinstance(item, int)
+                  else float if isinstance(item, float) else str)
+    if kinds == {int, float}:
+        return (f"the array mixes integers and doubles ({value!r}), which ROS 2's parameter "
+                'file parser refuses: write every number as a double (0.0, not 0)')
+    if len(kinds) > 1:
+        return (f"the array mixes types ({value!r}), which ROS 2's parameter file parser "
+                'refuses: one type per array')
+    return None
 
 
 def _check_flow_depth(path, text):
@@ -130,11 +191,14 @@ def _check_flow_depth(path, text):
 _SafeBase = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)   # libyaml's parser when built
 
 
-class ParamsLoader(_SafeBase):
-    """YAML's safe loader (libyaml's parser where available: 50x faster), as strict as a
-    ROS parameter file should be read: a key written twice in one mapping is an error (not
-    "the last wins"), and floats may be written without a dot (``1e9``, ``-1e-4``), as rcl
-    reads them."""
+class RclLoader(_SafeBase):
+    """YAML's safe loader (libyaml's parser where available: 50x faster) reading numbers as
+    rcl does: floats may be written without a dot (``1e9``, ``-1e-4``)."""
+
+
+class ParamsLoader(RclLoader):
+    """:class:`RclLoader`, as strict as a ROS parameter file should be read: a key written
+    twice in one mapping is an error (not "the last wins")."""
 
     def construct_mapping(self, node, deep=False):
         seen = set()
@@ -149,8 +213,8 @@ class ParamsLoader(_SafeBase):
         return super().construct_mapping(node, deep)
 
 
-ParamsLoader.yaml_implicit_resolvers = {
+RclLoader.yaml_implicit_resolvers = {
     first: list(resolvers) for first, resolvers in _SafeBase.yaml_implicit_resolvers.items()}
-ParamsLoader.add_implicit_resolver(
+RclLoader.add_implicit_resolver(
     'tag:yaml.org,2002:float', re.compile(r'^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
     list('-+0123456789'))

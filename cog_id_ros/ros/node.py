@@ -73,6 +73,7 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 import yaml
 
+from .. import params_file
 from ..core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
 from . import stop_signals
 from .conversions import (
@@ -957,61 +958,22 @@ def params_file_problem(argv: list[str]) -> str | None:
     """A sentence naming the first parameter of a ``--params-file`` rcl would refuse, or None.
 
     rcl's own message names a line of the file, not the parameter, and comes with a
-    second log line; the files are read here first (PyYAML) for what rcl refuses: arrays
-    that mix integers and doubles or other types, nested arrays, empty values.
+    second log line; the files are read here first, by the API's reader and its one rule of
+    what rcl refuses (:mod:`cog_id_ros.params_file`: ``read_document``, numbers read as rcl
+    reads them, and ``check_rcl_values``: arrays that mix integers and doubles or other
+    types), so the node and ``Mechanism.from_params_file`` refuse the same files with the
+    same message. Keys written twice are left to rcl (the last one wins).
     """
     files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
     for path in files:
         try:
-            with open(path, encoding='utf-8') as stream:
-                document = yaml.safe_load(stream)
-        except OSError as exc:
-            return f'--params-file {path}: cannot read it: {exc.strerror}'
-        except yaml.YAMLError as exc:
-            where = getattr(exc, 'problem_mark', None)
-            line = f' (line {where.line + 1})' if where is not None else ''
-            what = getattr(exc, 'problem', None) or 'syntax error'
-            return f'--params-file {path}: not valid YAML{line}: {what}'
-        if not isinstance(document, dict):
-            continue                # rcl says what it thinks of it
-        for body in document.values():
-            params = body.get('ros__parameters') if isinstance(body, dict) else None
-            if not isinstance(params, dict):
-                continue
-            for name, value in _flat(params):
-                problem = _rcl_value_problem(value)
-                if problem:
-                    return f'{name}: {problem} (in --params-file {path})'
-    return None
-
-
-def _flat(params, prefix=''):
-    for key, value in params.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, dict):
-            yield from _flat(value, name + '.')
-        else:
-            yield name, value
-
-
-def _rcl_value_problem(value):
-    """Why rcl's parameter parser would refuse ``value`` (from PyYAML), or None.
-
-    Only what rcl is known to refuse (arrays of mixed types); anything else rcl refuses
-    is named by its line (:func:`_rcl_message`).
-    """
-    if not isinstance(value, list) or not all(
-            isinstance(item, (bool, int, float, str)) for item in value):
-        return None
-    kinds = set()
-    for item in value:
-        kinds.add(bool if isinstance(item, bool) else int if isinstance(item, int)
-                  else float if isinstance(item, float) else str)
-    if kinds == {int, float}:
-        return (f'the array mixes integers and doubles ({value!r}): write every number as a '
-                'double (0.0, not 0)')
-    if len(kinds) > 1:
-        return f'the array mixes types ({value!r}): rcl needs one type per array'
+            params_file.check_rcl_values(params_file.read_document(path, duplicate_keys=True),
+                                         path)
+        except MechanismConfigError as exc:
+            text = _one_line(exc)
+            if exc.parameter == 'params_file':      # the file itself: say it as given
+                text = '--params-file' + text[len('params_file'):]
+            return text
     return None
 
 
