@@ -2,7 +2,9 @@
 
     .venv/bin/python bench/bench_peer.py [--backend NAME] [--only NAME] [--batch 10000]
 
-For every example mechanism (config/*.yaml with a test motion in test/trajectories.py):
+For every example mechanism (config/*.yaml with a test motion in test/trajectories.py; the
+peers time a twin written with spherical joints, e.g. stewart_6ups_spherical, on its
+helper-link original, the same mechanism):
 
 * per sample: the test motion at 1 kHz (2,001 setpoints over its 2 s), each sample one call,
   warm-started from the previous one, ``InverseDynamics(mech)`` (or ``backend=NAME``) and the
@@ -37,7 +39,7 @@ for path in (REPO, HERE, os.path.join(REPO, 'test')):
         sys.path.insert(0, path)
 
 from peer import OraclePeer, Peer  # noqa: E402
-from trajectories import TRAJECTORIES  # noqa: E402
+from trajectories import TRAJECTORIES, TWINS  # noqa: E402
 
 import cog_id_ros  # noqa: E402
 
@@ -125,9 +127,12 @@ def main(argv=None):
     rows = []
     for name in names:
         path = os.path.join(REPO, 'config', name)
+        # a twin (spherical joints where the original has helper links) is the same
+        # mechanism: the peers, which know revolute and prismatic joints only, read the original
+        peer_path = os.path.join(REPO, 'config', TWINS.get(name, name))
         mech = cog_id_ros.Mechanism.from_params_file(path)
         solver = cog_id_ros.InverseDynamics(mech, **kwargs)
-        peer = Peer(path)
+        peer = Peer(peer_path)
         t = np.arange(2001) / 1000.0
         q, qd, qdd = TRAJECTORIES[name](t)
         err = check(name, mech, peer, kwargs, q, qd, qdd)
@@ -145,15 +150,15 @@ def main(argv=None):
         with tempfile.TemporaryDirectory() as cache:     # first time: trace (+ compile)
             load_s, load_mb = load_cost(path, kwargs, cache=cache)
             cached_s, _ = load_cost(path, kwargs, cache=cache)
-        peer_load_s, _ = load_cost(path, {}, peer=True)
-        row = (name.replace('.yaml', ''), len(mech.joints), len(mech.joints) - len(mech.links),
+        peer_load_s, _ = load_cost(peer_path, {}, peer=True)
+        row = (name.replace('.yaml', ''), len(mech.joints), len(mech.model.loops),
                mech.dof, solver.backend, f'{med["ours"] * 1e6:.1f}', f'{med["peer"] * 1e6:.1f}',
                f'{med["ours"] / med["peer"]:.3f}', f'{rate:,.0f}', f'{peer_rate:,.0f}',
                f'{rate / peer_rate:.1f}', f'{load_s:.3f}', f'{load_mb:.0f}', f'{cached_s:.3f}',
                f'{peer_load_s:.3f}',
                f'{err:.0e}')
         if args.oracle:
-            oracle = OraclePeer(path)
+            oracle = OraclePeer(peer_path)
             times = []
             for i in range(BLOCK):
                 t0 = time.perf_counter()

@@ -154,17 +154,18 @@ class Batch:
         z, knots_z = qa[:, m.primary], knots_q[:, m.primary_joints]
         linear = knots_q[prv] + lam * (knots_q[nxt] - knots_q[prv])
         turns = np.array([m.joint_types[j] == 'revolute' for j in m.primary_joints])
-        tangents = ((1.0 - lam) * (knots_q[prv] + _times(knots_v[prv],
-                                                         _wrapped(z - knots_z[prv], turns))) +
-                    lam * (knots_q[nxt] + _times(knots_v[nxt], _wrapped(z - knots_z[nxt], turns))))
+        tangents = ((1.0 - lam) * (knots_q[prv] + _by_knot(knots_v, prv,
+                                                           _wrapped(z - knots_z[prv], turns))) +
+                    lam * (knots_q[nxt] + _by_knot(knots_v, nxt,
+                                                   _wrapped(z - knots_z[nxt], turns))))
         guess = 0.5 * (linear + tangents)
         guess[:, m.primary_joints] = z
         positions, flat, converged, mismatch = self.close(guess, qa, qd, qdd)
         record = self.record(flat)
-        basis = self.basis(record)                        # (N, n_joints, dof)
+        basis = _Bases(m, record.basis)
         ok = (converged & (record.condition <= m.max_condition_number) &
               (mismatch <= m.setpoint_tolerance) & ~invalid)
-        ok &= self.continues(state, qa, positions, basis)      # 3. the serial rules
+        ok &= self.continues(state, qa, positions, record.basis)      # 3. the serial rules
         errors = [None] * n
         redone = self.resolve_serially(state, qa, positions, basis, ok, invalid, errors,
                                        on_invalid)
@@ -250,21 +251,25 @@ class Batch:
             basis[:, j, k] = 1.0
         return basis
 
-    def continues(self, start_state, qa, positions, basis):
+    def continues(self, start_state, qa, positions, free_rows):
         """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for
         i = 0) and within the Newton correction bound of its first-order prediction, i.e.
-        where the serial path would have taken it in one step from there."""
+        where the serial path would have taken it in one step from there. ``free_rows``:
+        the velocity basis rows of the free joints (N, n_free, dof); the primary actuators'
+        rows are unit rows, so they move by dz."""
         m = self.mechanism
+        free = m.free_joints
         limits, bounds = np.array(self.serial.limits), np.array(self.serial.bounds)
         prev_q = np.vstack([np.asarray(start_state[0], float)[None, :], positions[:-1]])
-        prev_basis = np.concatenate([np.asarray(start_state[1], float)[None], basis[:-1]])
         dz = qa[:, m.primary] - prev_q[:, m.primary_joints]
-        moved = _times(prev_basis, dz)
-        predicted = prev_q + moved
+        moved = np.empty((len(qa), len(free)))
+        moved[0] = np.asarray(start_state[1], float)[free] @ dz[0]
+        moved[1:] = np.matmul(free_rows[:-1], dz[1:, :, None])[:, :, 0]
+        predicted = prev_q
+        predicted[:, free] += moved
         predicted[:, m.primary_joints] = qa[:, m.primary]
-        near = (np.abs(qa[:, m.primary] - prev_q[:, m.primary_joints]) <=   # as fits_one_step
-                limits[m.primary_joints])
-        return (near.all(axis=1) & (np.abs(moved) <= limits).all(axis=1) &
+        near = np.abs(dz) <= limits[m.primary_joints]              # as fits_one_step
+        return (near.all(axis=1) & (np.abs(moved) <= limits[free]).all(axis=1) &
                 (np.abs(positions - predicted) <= bounds).all(axis=1))
 
     def resolve_serially(self, start_state, qa, positions, basis, ok, invalid, errors,
@@ -323,9 +328,35 @@ def _wrapped(dz, revolute):
     return np.where(revolute, dz - 2.0 * np.pi * np.round(dz / (2.0 * np.pi)), dz)
 
 
-def _times(basis, dz):
-    """V dz of every sample: (N, n_joints, dof) by (N, dof)."""
-    return np.einsum('njk,nk->nj', basis, dz)
+def _by_knot(bases, knot, dz):
+    """V_k dz of every sample, V_k = bases[knot[i]] (K, n_joints, dof), knot non-decreasing:
+    one product per run of samples that share a knot, no (N, n_joints, dof) copy."""
+    out = np.empty((len(dz), bases.shape[1]))
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(knot)) + 1, [len(dz)]])
+    for a, b in zip(starts[:-1], starts[1:]):
+        out[a:b] = dz[a:b] @ bases[knot[a]].T
+    return out
+
+
+class _Bases:
+    """The velocity bases V (n_joints, dof) of N samples, made per sample when asked for
+    from the records' free rows (N, n_free, dof); re-solved samples' bases as set."""
+
+    def __init__(self, mechanism, free_rows):
+        self.mechanism, self.free_rows, self.solved = mechanism, free_rows, {}
+
+    def __getitem__(self, i):
+        if i in self.solved:
+            return self.solved[i]
+        m = self.mechanism
+        basis = np.zeros((len(m.joints), m.dof))
+        basis[m.free_joints] = self.free_rows[i]
+        for k, j in enumerate(m.primary_joints):
+            basis[j, k] = 1.0
+        return basis
+
+    def __setitem__(self, i, basis):
+        self.solved[i] = np.asarray(basis, dtype=float)
 
 
 def columns(array):
