@@ -349,7 +349,7 @@ def test_initial_positions_left_out_are_zero_and_other_parameters_pass_through()
     assert native['rate'] == 500.0
 
 
-def test_params_file_with_relative_urdf_file(tmp_path):
+def test_params_file_with_relative_urdf_file(tmp_path, monkeypatch):
     sub = tmp_path / 'robots'
     sub.mkdir()
     (sub / 'four_bar.urdf').write_text(four_bar_urdf(), encoding='utf-8')
@@ -383,7 +383,7 @@ def test_params_file_with_relative_urdf_file(tmp_path):
     np.testing.assert_allclose(cog_id_ros.InverseDynamics(mech).torques(*motion), ref,
                                rtol=1e-12, atol=1e-12 * np.abs(ref).max())
     # the core's own entry point, from another working directory
-    os.chdir(tmp_path)
+    monkeypatch.chdir(tmp_path)
     mech = Mechanism.from_params_file(path)
     np.testing.assert_allclose(cog_id_ros.InverseDynamics(mech).torques(*motion), ref,
                                rtol=1e-12, atol=1e-12 * np.abs(ref).max())
@@ -790,3 +790,30 @@ def test_four_bar_closed_by_a_joint_without_coordinate(kind):
     ref = cog_id_ros.InverseDynamics(Mechanism.from_parameters(four_bar_native())).torques(
         *motion)
     np.testing.assert_allclose(ours, ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+
+
+def test_base_link_may_be_a_moving_link():
+    """A base link welded to a moving link: its group of welded links is named after it, and
+    the URDF's root becomes a moving link (the core takes joints in either direction)."""
+    native, names = all_active(ARM, (0.0, 0.0, -9.81), **{'mechanism.base_link': 'elbow_flange'})
+    assert native['mechanism.base_link'] == 'elbow_flange'
+    assert native['mechanism.links'] == ['world', 'shoulder', 'forearm', 'wrist',
+                                         'counterweight']
+    assert native['joints.j2.child'] == 'elbow_flange'      # upper_arm is welded to the base
+    assert native['joints.j2.child_xyz'] != [0.0, 0.0, 0.0]
+    assert native['joints.j3.parent'] == 'elbow_flange'
+    assert native['joints.j3.parent_xyz'] == [0.02, 0.0, 0.05]   # written in its frame
+    assert native['links.world.mass'] == pytest.approx(4.0)     # the pedestal, welded to it
+    mech = Mechanism.from_parameters(native)
+    q, qd, qdd = random_states(native, 3, 4)
+    assert np.all(np.isfinite(cog_id_ros.InverseDynamics(mech).torques(q, qd, qdd)))
+    # the same body as base, named after upper_arm: the same torques, gravity turned along
+    g_upper = np.array([0.3, -0.2, -9.81])
+    r_upper_flange = rpy_matrix((0.3, 0.4, -0.5)) @ rpy_matrix((0.0, -0.7, 0.0))
+    torques = []
+    for base, g in (('upper_arm', g_upper), ('elbow_flange', r_upper_flange.T @ g_upper)):
+        native, _ = all_active(ARM, g, **{'mechanism.base_link': base})
+        torques.append(cog_id_ros.InverseDynamics(Mechanism.from_parameters(native)).torques(
+            q, qd, qdd))
+    np.testing.assert_allclose(torques[1], torques[0], rtol=1e-12,
+                               atol=1e-12 * np.abs(torques[0]).max())
