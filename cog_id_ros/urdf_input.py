@@ -584,10 +584,14 @@ class _Frame:
 
 class _Bodies:
     """Rigid bodies after merging fixed joints: for each URDF link the link that survives
-    (``body``) and the link's frame in the survivor's (``frame``)."""
+    (``body``) and the link's frame in the survivor's (``frame``); for each survivor its
+    links (``members``, document order)."""
 
-    def __init__(self, body, frame):
+    def __init__(self, robot, body, frame):
         self.body, self.frame = body, frame
+        self.members = {}
+        for link in robot.links.values():
+            self.members.setdefault(body[link.name], []).append(link)
 
     def attach(self, link, xyz, rpy):
         """(xyz, rpy) of a frame given in ``link``'s frame, in the frame of its body."""
@@ -618,12 +622,12 @@ def _merge_fixed(robot, base):
             if body[link] == top:
                 body[link] = base
                 frame[link] = _Frame() if link == base else to_base * frame[link]
-    return _Bodies(body, frame)
+    return _Bodies(robot, body, frame)
 
 
-def _mass_properties(robot, bodies, name):
+def _mass_properties(bodies, name):
     """Mass, COG and inertia about the COG of the body ``name``, in its frame."""
-    members = [robot.links[link] for link in robot.links if bodies.body[link] == name]
+    members = bodies.members[name]
     if len(members) == 1:
         link = members[0]
         return link.mass, [float(x) for x in link.com], link.inertia
@@ -670,7 +674,7 @@ def _native(r, robot, closures, base, bodies):
     _check_active(r, robot, closures)
     out['mechanism.initial_positions'] = _initial_positions(r, robot, closures, coordinates)
     for name in links:
-        mass, com, inertia = _mass_properties(robot, bodies, name)
+        mass, com, inertia = _mass_properties(bodies, name)
         out[f'links.{name}.mass'] = float(mass)
         out[f'links.{name}.com'] = com
         out[f'links.{name}.inertia'] = _six(inertia)
