@@ -131,9 +131,15 @@ class _Source:
     def __init__(self, parameter, where, data):
         self.parameter = parameter   # robot_description or mechanism.urdf_file
         self.where = where           # '' or the file's path, ahead of 'line N'
-        self.data = data             # str (robot_description) or bytes (a file)
+        # str (robot_description) or bytes (a file). Whitespace ahead of the XML declaration
+        # (a YAML string starting on a new line) is dropped, as XML would refuse it; lines
+        # are still counted from the start of what was given
+        self.data = data.lstrip()
+        skipped = data[:len(data) - len(self.data)]
+        self.skipped_lines = skipped.count('\n' if isinstance(data, str) else b'\n')
 
     def error(self, line, message):
+        line += self.skipped_lines
         at = f'{self.where} line {line}' if self.where else f'line {line}'
         return MechanismConfigError(self.parameter, f'{at}: {message}')
 

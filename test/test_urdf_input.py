@@ -521,6 +521,16 @@ def test_urdf_that_does_not_parse_gives_the_line():
     assert str(err).startswith('robot_description: line 3') and 'mismatched tag' in str(err)
 
 
+def test_whitespace_ahead_of_the_xml_declaration_is_accepted_and_lines_still_count():
+    urdf = '\n  \n<?xml version="1.0"?>\n' + four_bar_urdf()
+    assert native_parameters(with_urdf(urdf))['mechanism.links'] == ['crank', 'coupler',
+                                                                      'rocker']
+    floating = urdf.replace('type="continuous"', 'type="floating"')
+    err = error_of(with_urdf(floating))
+    line = floating[:floating.index('type="floating"')].count('\n') + 1
+    assert line > 3 and f'robot_description: line {line}:' in str(err)
+
+
 def test_doctype_and_entities_are_refused():
     laughs = ('<?xml version="1.0"?>\n<!DOCTYPE robot [\n<!ENTITY a "aaaaaaaaaa">\n'
               '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">\n]>\n<robot name="&b;"/>')
