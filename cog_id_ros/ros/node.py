@@ -30,7 +30,9 @@ rclpy's QoS override parameters, e.g.
 ``-p qos_overrides./joint_setpoint.subscription.depth:=1``). See docs/node.md for why.
 
 Parameters: the mechanism (``mechanism.*``, ``links.*``, ``joints.*``; see the README's
-mechanism parameter file section) and the node's own, written once with their types,
+mechanism parameter file section; or in the URDF form, ``robot_description`` or
+``mechanism.urdf_file`` with ``loop_closures.*``, docs/urdf.md: a relative urdf_file is
+relative to the params file that gives it) and the node's own, written once with their types,
 defaults, bounds and meaning in :mod:`cog_id_ros.ros.parameters` (``NODE_PARAMETERS``).
 All are read once at start-up and are read-only afterwards,
 ``use_sim_time`` included. A parameter that cannot be honoured (or a params file rcl cannot
@@ -90,7 +92,12 @@ from .conversions import (
     trajectory_point_count,
     trajectory_process,
 )
-from .parameters import MAX_QOS_DEPTH, MECHANISM_PREFIXES, NODE_PARAMETERS, QOS_OVERRIDE_VALUES
+from .parameters import (
+    MAX_QOS_DEPTH,
+    NODE_PARAMETERS,
+    QOS_OVERRIDE_VALUES,
+    is_mechanism_parameter,
+)
 from .setpoint_filter import SetpointFilter, StampError
 from .setpoint_loop import SetpointLoop
 from .topics import DIAGNOSTICS_QOS_DEPTH, TOPICS, control_qos
@@ -105,11 +112,13 @@ the closed pose of every joint on joint_states (every joint_states_decimation-th
 whole trajectories in on joint_trajectory, out on effort_trajectory; counts and health
 on /diagnostics.
 
-The mechanism (mechanism.*, links.*, joints.*) and the node's own parameters come from a
+The mechanism (mechanism.*, links.*, joints.*; or a URDF: robot_description or
+mechanism.urdf_file, with loop_closures.*) and the node's own parameters come from a
 ROS 2 parameter file, e.g.
 
     {NODE_NAME} --ros-args --params-file config/paper_four_bar_a.yaml
     {NODE_NAME} --ros-args --params-file config/paper_four_bar_b.yaml -r __ns:=/arm
+    {NODE_NAME} --ros-args --params-file config/crank_rocker_urdf.yaml
 
 A parameter that cannot be honoured ends the node with exit status 2 and one line naming
 it. Ctrl-C or SIGTERM stop it (exit status 0).
@@ -170,15 +179,25 @@ def _guarded(method):
 class CogIdNode(Node):
     """Inverse dynamics of the mechanism in its parameters, served over topics."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, command_line=None, **kwargs):
+        """``command_line``: the process's arguments (main() passes them), for the directory
+        a relative ``mechanism.urdf_file`` is relative to (:func:`urdf_base_dir`)."""
         super().__init__(NODE_NAME, **kwargs)
         overrides = self._override_values()
-        self.mechanism = Mechanism.from_parameters(self._declare_mechanism_parameters(overrides))
+        base_dir = urdf_base_dir(command_line, self.get_name()) \
+            if 'mechanism.urdf_file' in overrides else None
+        self.mechanism = Mechanism.from_parameters(
+            self._declare_mechanism_parameters(overrides), base_dir=base_dir)
         mech = self.mechanism
         self.active_joints = list(mech.active_joints)
         n_act = len(self.active_joints)
         self.active_types = [mech.joint_types[mech.joints.index(j)] for j in self.active_joints]
-        cfg = self._declare_node_parameters(overrides, self.active_types)
+        # the mechanism's effort limits (joints.<j>.effort, URDF <limit effort>) are the
+        # default of effort_limits; the node's parameter, when given, wins
+        mechanism_limits = getattr(mech, 'effort_limits', None)
+        cfg = self._declare_node_parameters(
+            overrides, self.active_types,
+            {'effort_limits': list(mechanism_limits) if mechanism_limits else None})
         self._check_qos_overrides(overrides)
         self._make_use_sim_time_read_only()
         self.effort_limits = cfg['effort_limits']
@@ -324,22 +343,30 @@ class CogIdNode(Node):
             read_only=True, description=description), ignore_override=True)
 
     def _declare_mechanism_parameters(self, overrides):
-        """Declare every mechanism parameter of the overrides read-only; return them."""
+        """Declare every mechanism parameter of the overrides read-only, native or URDF form
+        (``is_mechanism_parameter``); return them."""
         values = {name: value for name, value in overrides.items()
-                  if name.startswith(MECHANISM_PREFIXES)}
+                  if is_mechanism_parameter(name)}
         for name, value in values.items():
             self._declare(name, value, 'mechanism (read at start-up)')
         return values
 
-    def _declare_node_parameters(self, overrides, active_types):
-        """Declare the node's parameters read-only, from the overrides or the defaults."""
+    def _declare_node_parameters(self, overrides, active_types, defaults=None):
+        """Declare the node's parameters read-only, from the overrides or the defaults
+        (``defaults``: name -> value instead of the table's default, None: the table's; an
+        empty list given for it counts as not given)."""
         known = set(NODE_PARAMETERS) | {'use_sim_time', 'start_type_description_service'}
         for name in sorted(overrides):
-            if not name.startswith(MECHANISM_PREFIXES + ('qos_overrides.',)) and name not in known:
+            if not (is_mechanism_parameter(name) or name.startswith('qos_overrides.')) \
+                    and name not in known:
                 self.get_logger().warning(f"ignoring unknown parameter '{name}'")
         cfg = {}
+        defaults = defaults or {}
         for name, param in NODE_PARAMETERS.items():
-            value = param.check(overrides.get(name, param.default), active_types)
+            value = overrides.get(name, param.default)
+            if defaults.get(name) is not None and (value is None or value == []):
+                value = defaults[name]
+            value = param.check(value, active_types)
             declared = value.tolist() if isinstance(value, np.ndarray) else value
             self._declare(name, declared, param.ros_description)
             cfg[name] = value
@@ -901,7 +928,7 @@ def main(args: list[str] | None = None) -> int:
     sys.setswitchinterval(SWITCH_INTERVAL)
     node = None
     try:
-        node = CogIdNode()
+        node = CogIdNode(command_line=argv)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         # Start-up left tens of thousands of long-lived objects (rclpy, numpy, the traced
@@ -975,6 +1002,27 @@ def params_file_problem(argv: list[str]) -> str | None:
                 text = '--params-file' + text[len('params_file'):]
             return text
     return None
+
+
+def urdf_base_dir(command_line, node_name):
+    """The directory a relative ``mechanism.urdf_file`` is relative to: that of the
+    ``--params-file`` that gives it to the node called ``node_name`` (rcl applies the files
+    and ``-p`` rules in their order on the command line: the last one that gives it counts);
+    None (the working directory) when a ``-p`` rule gives it, or nothing does."""
+    base = None
+    args = list(command_line or ())
+    for arg, value in zip(args, args[1:]):
+        if arg == '--params-file':
+            try:
+                given = 'mechanism.urdf_file' in params_file.load_params_file(value, node_name)
+            except MechanismConfigError:
+                given = False
+            if given:
+                base = os.path.dirname(os.path.abspath(value))
+        elif arg in ('-p', '--param') and \
+                value.split(':=', 1)[0].rsplit(':', 1)[-1] == 'mechanism.urdf_file':
+            base = None
+    return base
 
 
 def _rcl_message(exc):

@@ -19,8 +19,17 @@ from typing import Any, Callable, Sequence
 
 from ..core import MechanismConfigError
 
-#: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters)
-MECHANISM_PREFIXES = ('mechanism.', 'links.', 'joints.')
+#: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters):
+#: the native form (links.*, joints.*) and the URDF form (loop_closures.*; docs/urdf.md)
+MECHANISM_PREFIXES = ('mechanism.', 'links.', 'joints.', 'loop_closures.')
+#: whole parameter names that describe the mechanism: the URDF as a string (ROS's name)
+MECHANISM_NAMES = ('robot_description',)
+
+
+def is_mechanism_parameter(name: str) -> bool:
+    """Whether the node hands parameter ``name`` to Mechanism.from_parameters."""
+    return name in MECHANISM_NAMES or name.startswith(MECHANISM_PREFIXES)
+
 
 TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
 
@@ -181,9 +190,13 @@ def _table(*params: NodeParameter) -> dict[str, NodeParameter]:
 NODE_PARAMETERS: dict[str, NodeParameter] = _table(
     NodeParameter(
         'effort_limits', 'double[]', None, 'per_joint', what='limit',
-        per_joint_default=lambda joint_type: math.inf, default_text='`.inf` each',
+        per_joint_default=lambda joint_type: math.inf,
+        default_text="the mechanism's (`joints.<j>.effort`, URDF `<limit effort>`), else "
+                     '`.inf`',
         description='N m or N, one per active joint or one for all: efforts are clipped to '
-                    '±limit and every clipping is counted in diagnostics (`.inf`: no limit)'),
+                    '±limit and every clipping is counted in diagnostics (`.inf`: no limit). '
+                    "Not given (or `[]`): the mechanism's effort limits of its active joints "
+                    '(`Mechanism.effort_limits`); given, it wins'),
     NodeParameter(
         'setpoint_timeout', 'double', 0.5, 'number', unit='s', low=0.005, high=3600.0,
         special=(0.0, 'no timeout'),
@@ -274,6 +287,11 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
 OTHER_PARAMETERS = (
     ('`mechanism.*`, `links.*`, `joints.*`', '', '', '',
      'the mechanism (README, "Mechanism parameter file")'),
+    ('`robot_description`, `mechanism.urdf_file`, `mechanism.loop_closures`, '
+     '`loop_closures.*`, `mechanism.initial_positions.<joint>`', '', '', '',
+     "the mechanism in the URDF form instead (docs/urdf.md): the URDF as a string (ROS's "
+     'standard parameter) or a file (relative to the params file that gives it), the joints '
+     'that close its loops, and the assembly mode by joint name'),
     ('`use_sim_time`', 'bool', '`false`', 'true, false',
      "rclpy's: the node's clock from `/clock` (stamps of zero, `max_stamp_lead`, the stamp "
      'of `/diagnostics`); read-only like the rest'),
