@@ -27,6 +27,8 @@ REASONS = {
              "more than max_stamp_lead ahead of the node's clock",
     'jump': 'an active joint moved farther than max_setpoint_step since the previous '
             'setpoint (after unwrapping revolute joints)',
+    'limit': "an active joint's position outside its limits (joints.<name>.lower / upper, "
+             'or the URDF <limit>)',
     'closure': 'the loops cannot be closed at this pose',
     'unreachable': 'the pose cannot be reached from the previous one by continuation',
     'singular': 'the pose is singular (closure Jacobian condition number too large)',
@@ -41,7 +43,7 @@ TRAJECTORY_REASONS = {
 }
 
 #: every core error reason (cog_id_ros.core.errors.REASONS) is a key of REASONS
-_CORE_REASONS = ('malformed', 'non_finite', 'out_of_range', 'closure', 'unreachable',
+_CORE_REASONS = ('malformed', 'non_finite', 'out_of_range', 'limit', 'closure', 'unreachable',
                  'singular', 'inconsistent')
 
 

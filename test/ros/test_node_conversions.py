@@ -12,6 +12,7 @@ from cog_id_ros.ros.conversions import REASONS, rejection  # noqa: E402
     (SetpointError('some finite words', reason='malformed'), 'malformed'),
     (ClosureError('cannot reach it', 1.0, reason='unreachable'), 'unreachable'),
     (ClosureError('redundant setpoint disagrees', 1.0, reason='inconsistent'), 'inconsistent'),
+    (SetpointError('q of joint3 is 2.1, outside its position limits', reason='limit'), 'limit'),
 ])
 def test_core_errors_map_by_their_reason_not_their_text(exc, reason):
     """Reliability mapping: rejection() searched the message text ('finite' in the text
@@ -19,6 +20,11 @@ def test_core_errors_map_by_their_reason_not_their_text(exc, reason):
     it maps exc.reason, and REASONS has the core's new reasons."""
     assert reason in REASONS
     assert rejection(exc).reason == reason
+
+
+def test_every_core_reason_is_a_reason_of_the_node():
+    from cog_id_ros.core.errors import REASONS as CORE_REASONS
+    assert set(CORE_REASONS) <= set(REASONS)
 
 
 def test_an_error_without_a_known_reason_is_solver():
