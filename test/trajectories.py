@@ -61,6 +61,7 @@ DRIVERS = {
     'five_bar.yaml': {'j1': _FIVE_J1, 'j5': _FIVE_J5},
     'five_bar_redundant.yaml': {'j1': _FIVE_J1, 'j5': _FIVE_J5},     # j3 from the closure
     'spatial_rsur.yaml': {'crank_joint': _law(0.5, 3.5, [(0.3, 0.0, PI)])},
+    'watt_six_bar.yaml': {'crank_joint': _law(0.0, PI)},          # one turn in 2 s
 }
 
 
