@@ -39,7 +39,7 @@ for path in (REPO, HERE, os.path.join(REPO, 'test')):
         sys.path.insert(0, path)
 
 from peer import OraclePeer, Peer  # noqa: E402
-from trajectories import TRAJECTORIES, TWINS  # noqa: E402
+from trajectories import NOT_FOR_ORACLE, TRAJECTORIES, TWINS  # noqa: E402
 
 import cog_id_ros  # noqa: E402
 
@@ -120,7 +120,8 @@ def main(argv=None):
     print('command: ' + ' '.join([os.path.relpath(sys.executable, REPO), 'bench/bench_peer.py'] + argv_shown))
     print(f'date: {datetime.datetime.now().isoformat(timespec="seconds")}   host cpus: {os.cpu_count()}')
     names = [os.path.basename(p) for p in sorted(glob.glob(os.path.join(REPO, 'config', '*.yaml')))]
-    names = [n for n in names if n in TRAJECTORIES and (args.only is None or args.only in n)]
+    names = [n for n in names if n in TRAJECTORIES and (args.only is None or args.only in n)
+             and (n in TWINS or n not in NOT_FOR_ORACLE)]     # (the peers read no URDF)
     head = ('mechanism', 'joints', 'loops', 'DOF', 'backend', 'ours us', 'peer us', 'ours/peer',
             'batch /s', 'peer /s', 'batch/peer', 'load s', 'load MB', 'cached load s',
             'peer load s', 'check') + (('oracle us', 'ours/oracle') if args.oracle else ())

@@ -62,6 +62,7 @@ DRIVERS = {
     'five_bar_redundant.yaml': {'j1': _FIVE_J1, 'j5': _FIVE_J5},     # j3 from the closure
     'spatial_rsur.yaml': {'crank_joint': _law(0.5, 3.5, [(0.3, 0.0, PI)])},
     'watt_six_bar.yaml': {'crank_joint': _law(0.0, PI)},          # one turn in 2 s
+    'crank_rocker_urdf.yaml': {'crank_joint': _law(PI / 2, 2 * PI)},   # two turns in 2 s
 }
 
 
@@ -282,3 +283,7 @@ TRAJECTORIES[DELTA] = _platform_driven(DELTA, _delta)
 TWINS = {'stewart_6ups_spherical.yaml': STEWART, 'delta_3rus_spherical.yaml': DELTA}
 for _twin, _original in TWINS.items():
     TRAJECTORIES[_twin] = TRAJECTORIES[_original]
+
+#: configs the oracle cannot read: the twins, and URDF descriptions (test/test_urdf_input.py
+#: checks those against Pinocchio's own URDF parser)
+NOT_FOR_ORACLE = set(TWINS) | {'crank_rocker_urdf.yaml'}

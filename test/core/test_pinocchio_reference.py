@@ -21,10 +21,18 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 from pinocchio_reference import Oracle, load_params, rpy_matrix, transform  # noqa: E402
-from trajectories import T_END, TRAJECTORIES, TWINS, config_path, oracle, oracle_along, sample  # noqa: E402
+from trajectories import (  # noqa: E402
+    NOT_FOR_ORACLE,
+    T_END,
+    TRAJECTORIES,
+    config_path,
+    oracle,
+    oracle_along,
+    sample,
+)
 
 CONFIGS = sorted(os.path.basename(p) for p in glob.glob(os.path.join(REPO, 'config', '*.yaml')))
-WITH_TRAJ = [c for c in CONFIGS if c in TRAJECTORIES and c not in TWINS]
+WITH_TRAJ = [c for c in CONFIGS if c in TRAJECTORIES and c not in NOT_FOR_ORACLE]
 EXPECTED_DOF = {'paper_four_bar_a.yaml': 1, 'paper_four_bar_b.yaml': 1, 'slider_crank.yaml': 1,
                 'five_bar.yaml': 2, 'five_bar_redundant.yaml': 2, 'spatial_rsur.yaml': 1}
 N_SAMPLES = 200
