@@ -478,7 +478,11 @@ class Mechanism:
                 'mechanism.active_joints',
                 f'{m} active joint(s) for {self.dof} degrees of freedom (closure rank '
                 f'{self.closure_rank} of {n} joint coordinates at the assembled initial '
-                f'positions): the motion is not determined; add active joints')
+                f'positions): the motion is not determined; add active joints, or, if the '
+                f'mechanism has fewer freedoms than that, it is at a singular pose there (e.g. '
+                f'three revolute joints written for a spherical one, with the middle one at '
+                f'+-pi/2: gimbal lock; write it as `type: spherical`, or change '
+                f'initial_positions)')
         self.primary = self._choose_primary(matrix)
         self.primary_joints = [self.active_index[i] for i in self.primary]
         #: (index into active_joints, joint index) of each primary actuator
