@@ -1,0 +1,316 @@
+"""cog_id_inspect: the printed tree, loops, DOF and joint table against the Mechanism, the
+warning for an assembly on another branch, the picture, and the error paths.
+
+Most runs call main() in this process (fast); the error path and --help also run the
+installed console script, as a user runs it.
+"""
+import math
+from pathlib import Path
+import re
+import shutil
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import cog_id_ros
+from cog_id_ros.core.kinematics import BASE
+from cog_id_ros.offline import inspect as tool
+from cog_id_ros.offline import mechanism_plot
+
+pytest.importorskip('matplotlib')
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIG = ROOT / 'config'
+CONFIGS = ['paper_four_bar_a', 'five_bar_redundant', 'stewart_6ups', 'spatial_rsur']
+TARGET = CONFIG / 'paper_four_bar_target.csv'
+UPRIGHT = ('initial_positions: [1.5707963267948966, -1.5707963267948966, 1.5707963267948966, '
+           '1.5707963267948966]')
+# joint1 and joint2 at 0 with the crank joint3 upright: the loop closes with link1 along the
+# ground and link2 folded onto link3, not the upright parallelogram of the file
+FOLDED = 'initial_positions: [0.0, 0.0, 1.5707963267948966, 1.5707963267948966]'
+
+
+def load(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', cog_id_ros.AssemblyWarning)
+        return cog_id_ros.Mechanism.from_params_file(str(path))
+
+
+def run_main(capsys, *args):
+    status = tool.main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def tool_command():
+    """The installed console script (as a user has it), else the module."""
+    script = Path(sys.executable).parent / 'cog_id_inspect'
+    if script.exists():
+        return [str(script)]
+    found = shutil.which('cog_id_inspect')
+    return [found] if found else [sys.executable, '-m', 'cog_id_ros.offline.inspect']
+
+
+def section(out, first_line_start):
+    """The lines of the report from the one starting with ``first_line_start`` to the next
+    blank line."""
+    lines = out.splitlines()
+    start = next(k for k, line in enumerate(lines) if line.startswith(first_line_start))
+    end = next((k for k in range(start, len(lines)) if not lines[k].strip()), len(lines))
+    return lines[start:end]
+
+
+def parse_tree(out):
+    """{link: (tree parent, joint, type, active)} from the printed spanning tree."""
+    lines = section(out, 'spanning tree')[2:]
+    tree, stack = {}, []
+    for line in lines:
+        m = re.match(r'^  ([| `-]*?)(?:\|-- |`-- )(\w+)  by (\w+) \((\w+)(, ACTIVE)?', line)
+        assert m, line
+        depth = len(m.group(1)) // 4
+        del stack[depth:]
+        parent = stack[-1] if stack else None
+        tree[m.group(2)] = (parent, m.group(3), m.group(4), bool(m.group(5)))
+        stack.append(m.group(2))
+    return tree
+
+
+def parse_loops(out):
+    """[(closing joint, [tree joints of the cycle], [links of the cycle])]."""
+    lines = section(out, 'loops (')[1:]
+    loops = []
+    for line in lines:
+        m = re.match(r'^  \d+\. closed by (\w+) \(', line)
+        if m:
+            loops.append([m.group(1), ''])
+        else:
+            loops[-1][1] += ' ' + line.strip()
+    parsed = []
+    for closing, cycle in loops:
+        words = cycle.split()
+        assert words[1::2].count(f'={closing}=') == 1, cycle
+        tree_joints = [w.strip('-') for w in words[1::2] if w.startswith('-')]
+        parsed.append((closing, tree_joints, words[0::2]))
+    return parsed
+
+
+def check_structure(out, mech):
+    """The printed tree, loops and DOF are the mechanism's."""
+    tree = parse_tree(out)
+    assert set(tree) == set(mech.links)
+    for edge in mech.model.edges:
+        parent, joint, kind, active = tree[mech.links[edge.child]]
+        assert parent == (None if edge.parent == BASE else mech.links[edge.parent])
+        assert joint == mech.joints[edge.joint]
+        assert kind == mech.joint_types[edge.joint]
+        assert active == (joint in mech.active_joints)
+    loops = parse_loops(out)
+    assert len(loops) == len(mech.model.loops)
+    for (closing, tree_joints, links), loop in zip(loops, mech.model.loops):
+        assert closing == loop.name
+        assert sorted(tree_joints) == sorted(mech.joints[j] for j, _ in loop.cycle)
+        assert links[0] == links[-1]          # the cycle comes back where it started
+        names = {mech.links[k] if k != BASE else mech.base_link for k in (loop.parent,
+                                                                          loop.child)}
+        assert names <= set(links)
+    assert f'degrees of freedom: {mech.dof} ' in out
+    assert f' {mech.dof} DOF' in out
+
+
+def joint_table(out):
+    """{joint: (type, role, given, assembled)} from the printed table (coordinates only)."""
+    rows = {}
+    for line in section(out, 'joints (given')[2:]:
+        if not line.startswith('  '):       # the WARNING lines after the table
+            break
+        cells = re.split(r'\s{2,}', line.strip())
+        if cells[3] == '-':
+            continue
+        rows[cells[0].rstrip(' !')] = (cells[1], cells[2], float(cells[3]), float(cells[4]))
+    return rows
+
+
+def check_picture(path):
+    from matplotlib import image
+    data = Path(path).read_bytes()
+    assert data[:8] == b'\x89PNG\r\n\x1a\n'
+    assert 15_000 < len(data) < 300_000
+    pixels = image.imread(str(path))
+    assert pixels.shape[0] > 300 and pixels.shape[1] > 500
+    # not blank: many pixels away from white, and some colours (the links) besides grey
+    rgb = pixels[..., :3]
+    assert np.mean(rgb.min(axis=2) < 0.9) > 0.02
+    assert np.mean(rgb.max(axis=2) - rgb.min(axis=2) > 0.3) > 0.002
+
+
+@pytest.mark.parametrize('name', CONFIGS)
+def test_report_and_picture_match_the_mechanism(name, tmp_path, capsys):
+    params = CONFIG / f'{name}.yaml'
+    picture = tmp_path / f'{name}.png'
+    status, out, err = run_main(capsys, '--params-file', params, '--plot', picture)
+    assert status == 0, err
+    assert err == ''
+    mech = load(params)
+    assert out.startswith(f'{mech.name}  ({params})')
+    check_structure(out, mech)
+    table = joint_table(out)
+    assert list(table) == list(mech.joints)
+    for j, name_j in enumerate(mech.joints):
+        kind, role, given, assembled = table[name_j]
+        assert kind == mech.joint_types[j]
+        assert role.startswith('active' if name_j in mech.active_joints else 'passive')
+        assert given == pytest.approx(mech.initial_positions[j], rel=1e-5, abs=1e-12)
+        assert assembled == pytest.approx(mech.assembled_positions[j], rel=1e-5, abs=1e-12)
+    assert 'WARNING' not in out
+    assert 'no joint moved far at assembly' in out
+    evaluation = cog_id_ros.InverseDynamics(mech, backend='reference').evaluate(
+        [mech.assembled_positions[j] for j in mech.active_index])
+    residual = float(re.search(r'closure residual (\S+)', out).group(1))
+    condition = float(re.search(r'condition number (\S+)', out).group(1))
+    assert residual == pytest.approx(float(evaluation.closure_residual[0]), rel=0.01, abs=1e-300)
+    assert residual < mech.closure_tolerance
+    assert condition == pytest.approx(float(evaluation.condition_number[0]), rel=1e-3)
+    assert out.rstrip().endswith(f'wrote {picture}')
+    check_picture(picture)
+
+
+def test_redundant_actuation_lists_roles_and_weights(capsys):
+    params = CONFIG / 'five_bar_redundant.yaml'
+    status, out, _ = run_main(capsys, '--params-file', params)
+    assert status == 0
+    mech = load(params)
+    assert mech.is_redundant
+    for a, name in enumerate(mech.active_joints):
+        role = 'primary' if a in mech.primary else 'redundant'
+        assert re.search(rf'^  {name}\s+{role}\s+weight {mech.torque_weights[a]:g}$', out,
+                         re.MULTILINE), name
+    assert 'redundant' in joint_table(out)['j3'][1]
+
+
+def test_planar_and_spatial_pictures():
+    for name, kind in (('paper_four_bar_a', 'planar'), ('five_bar_redundant', 'planar'),
+                       ('slider_crank', 'planar'), ('stewart_6ups', 'spatial'),
+                       ('spatial_rsur', 'spatial')):
+        mech = load(CONFIG / f'{name}.yaml')
+        assert mechanism_plot.figure_kind(mech, mech.assembled_positions) == kind, name
+
+
+def test_joint_points_close_the_loops():
+    """The picture's joints: both attachment frames of a revolute joint at one point."""
+    mech = load(CONFIG / 'stewart_6ups.yaml')
+    pose = mechanism_plot.Pose(mech, mech.assembled_positions)
+    for joint in pose.joints:
+        gap = np.linalg.norm(joint['parent_point'] - joint['child_point'])
+        if joint['kind'] == 'revolute':
+            assert gap < 1e-9, joint['name']
+        else:          # prismatic: apart by the joint coordinate
+            q = mech.assembled_positions[mech.joints.index(joint['name'])]
+            assert gap == pytest.approx(abs(q), abs=1e-9)
+    assert len(pose.base_points) == 6                # the six U joints on the ground
+
+
+def test_another_branch_is_warned(tmp_path, capsys):
+    text = (CONFIG / 'paper_four_bar_a.yaml').read_text()
+    assert UPRIGHT in text
+    params = tmp_path / 'folded.yaml'
+    params.write_text(text.replace(UPRIGHT, FOLDED))
+    picture = tmp_path / 'folded.png'
+    status, out, err = run_main(capsys, '--params-file', params, '--plot', picture)
+    assert status == 0, err
+    mech = load(params)
+    # the loader's own judgement: it moved joint2 and joint4 far (another branch)
+    assert mech.assembly_warnings
+    far = set(re.findall(r"'(\w+)' from", mech.assembly_warnings[0]))
+    assert far == {'joint2', 'joint4'}
+    warned = re.findall(r"^WARNING: passive joint '(\w+)' moved from (\S+) to (\S+) rad",
+                        out, re.MULTILINE)
+    assert {name for name, _, _ in warned} == far
+    for name, given, assembled in warned:
+        j = mech.joints.index(name)
+        assert float(given) == pytest.approx(mech.initial_positions[j], abs=1e-4)
+        assert float(assembled) == pytest.approx(mech.assembled_positions[j], abs=1e-4)
+        assert abs(float(assembled) - float(given)) > 1.0
+    assert 'another branch' in out
+    assert 'set initial_positions of joint2, joint4' in out
+    table = joint_table(out)
+    assert table['joint2'][3] == pytest.approx(math.pi / 2, abs=1e-4)
+    assert table['joint1'][3] == pytest.approx(0.0, abs=1e-4)
+    assert 'the loader said' in out
+    check_structure(out, mech)          # the structure does not depend on the branch
+    check_picture(picture)
+
+
+def test_trajectory_snapshots(tmp_path, capsys):
+    params = CONFIG / 'paper_four_bar_a.yaml'
+    picture = tmp_path / 'motion.png'
+    status, out, err = run_main(capsys, '--params-file', params, '--plot', picture,
+                                '--trajectory', TARGET, '--snapshots', '4')
+    assert status == 0, err
+    assert 'ignoring joint1.position' in err          # the note of the CSV reader
+    assert f'trajectory {TARGET}: 2,001 rows, t = 0 .. 2 s' in out
+    assert re.search(r'solved (\d+) of \1 rows', out)
+    assert 'snapshots: t = 0, 0.667, 1.333, 2 s' in out      # rows 1, 668, 1334, 2001
+    check_picture(picture)
+    # the snapshots are solved poses of the parallelogram: joint1 = joint3 = theta(t)
+    mech = load(params)
+    solver = cog_id_ros.InverseDynamics(mech, backend='reference')
+    motion = tool.solve_trajectory(mech, solver, TARGET, 4, sys.stderr)
+    assert [t for t, _ in motion.snapshots] == pytest.approx([0.0, 2 / 3, 4 / 3, 2.0],
+                                                             abs=1e-3)
+    for t, q in motion.snapshots:
+        theta = math.pi / 2 + 0.5 * math.sin(math.pi * t)
+        assert q[mech.joints.index('joint3')] == pytest.approx(theta, abs=1e-9)
+        assert q[mech.joints.index('joint1')] == pytest.approx(theta, abs=1e-9)
+    assert motion.residual < mech.closure_tolerance and not motion.refused
+
+
+def test_trajectory_without_plot_and_a_bad_csv(tmp_path, capsys):
+    params = CONFIG / 'paper_four_bar_a.yaml'
+    status, out, _ = run_main(capsys, '--params-file', params, '--trajectory', TARGET)
+    assert status == 0
+    assert 'largest closure residual' in out and 'wrote' not in out
+    bad = tmp_path / 'bad.csv'
+    bad.write_text('time,joint3.position\n0.0,1.5\n0.1,oops\n')
+    status, out, err = run_main(capsys, '--params-file', params, '--trajectory', bad)
+    assert status == 1 and out == ''
+    assert err.count('\n') == 1
+    assert "row 2 (line 3 of the file), column 'joint3.position'" in err
+
+
+def test_configuration_error_exits_2_naming_the_parameter(tmp_path):
+    text = (CONFIG / 'paper_four_bar_a.yaml').read_text()
+    params = tmp_path / 'bad.yaml'
+    params.write_text(text.replace('mass: 1.0', 'mass: -1.0', 1))
+    picture = tmp_path / 'never.png'
+    proc = subprocess.run(tool_command() + ['--params-file', str(params), '--plot',
+                                            str(picture)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stdout == ''
+    assert proc.stderr.count('\n') == 1
+    assert proc.stderr.startswith('cog_id_inspect: error: ')
+    assert 'links.link1.mass: must be >= 0' in proc.stderr
+    assert 'Traceback' not in proc.stderr
+    assert not picture.exists() and list(tmp_path.iterdir()) == [params]
+
+
+def test_usage_errors_and_help(tmp_path, capsys):
+    params = CONFIG / 'paper_four_bar_a.yaml'
+    status, out, err = run_main(capsys, '--params-file', tmp_path / 'missing.yaml')
+    assert status == 2 and 'missing.yaml: no such file' in err and out == ''
+    status, _, err = run_main(capsys, '--params-file', params, '--plot', tmp_path / 'x.nope')
+    assert status == 2 and "unknown image format 'nope'" in err
+    status, _, err = run_main(capsys, '--params-file', params, '--plot',
+                              tmp_path / 'no_dir' / 'x.png')
+    assert status == 2 and 'does not exist' in err
+    with pytest.raises(SystemExit) as exc:
+        tool.main([])
+    assert exc.value.code == 2
+    assert '--params-file' in capsys.readouterr().err
+    proc = subprocess.run(tool_command() + ['--help'], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0
+    assert 'exit status' in proc.stdout and '--trajectory' in proc.stdout
