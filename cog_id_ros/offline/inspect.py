@@ -44,6 +44,8 @@ MAX_SNAPSHOTS = 12
 #: follows the motion from one to the next, so the snapshots stay on its branch
 TRAJECTORY_ROWS = 200
 WIDTH = 99
+#: coordinates and differences below this (rad or m) are shown as 0: closure rounding
+TINY = 1e-12
 
 EPILOG = f"""\
 what it prints:
@@ -391,7 +393,8 @@ def joint_rows(mech):
             role = 'passive'
             limit, _ = far_limit(mech, j)
             if moved > limit:
-                warning = (f"passive joint '{name}' moved from {given:.6g} to {assembled:.6g} "
+                warning = (f"passive joint '{name}' moved from {_value(given)} to "
+                           f"{_value(assembled)} "
                            f'{unit} (by {moved:.3g}, more than {limit:.3g} {unit})')
         if j in closing:
             role += f', closes loop {closing[j]}'
@@ -404,8 +407,8 @@ def format_joint_table(mech):
     header = ('joint', 'type', 'role', 'given', 'assembled', 'difference', 'unit')
     table = [header]
     for name, kind, role, given, assembled, unit, warning in rows:
-        table.append((name + (' !' if warning else ''), kind, role, f'{given:.6g}',
-                      f'{assembled:.6g}', _signed(assembled - given), unit))
+        table.append((name + (' !' if warning else ''), kind, role, _value(given),
+                      _value(assembled), _signed(assembled - given), unit))
     closing = {lp.name: k for k, lp in enumerate(mech.model.loops, start=1)}
     for spec in getattr(mech, 'closure_specs', ()):
         table.append((spec.name, spec.kind, f'passive, closes loop {closing.get(spec.name)}',
@@ -435,8 +438,13 @@ def format_joint_table(mech):
     return lines
 
 
+def _value(value):
+    """A coordinate for the table: 6 digits; below TINY (rounding in the closure), 0."""
+    return f'{value:.6g}' if abs(value) >= TINY else '0'
+
+
 def _signed(value):
-    return f'{value:+.3g}' if value else '0'
+    return f'{value:+.3g}' if abs(value) >= TINY else '0'
 
 
 def _far_text(mech):

@@ -23,6 +23,8 @@ from ..core import spatial as sp
 PLANAR_TOLERANCE = 1e-6
 #: points of one link closer than this fraction of the mechanism's size are one point
 SAME_POINT = 1e-6
+#: margin around the drawing, as a fraction of its size
+PAD = 0.12
 #: joints and links are named on the picture up to these counts
 MAX_JOINT_LABELS = 12
 MAX_LINK_LABELS = 8
@@ -185,10 +187,11 @@ def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=
     if normal is not None and all(planar_normal(mech, g) is not None for _, g in ghosts):
         horizontal, up, labels = plane_axes(normal, mech.gravity)
         basis = np.array([horizontal, up])
-        extent = np.ptp(np.vstack([g.all_points() for g in [pose] + [g for _, g in ghosts]])
-                        @ basis.T, axis=0) + 1e-9
-        height = min(max(5.4 * extent[1] / extent[0], 2.6), 6.4)   # the axes, in inches
-        fig = Figure(figsize=(8.4, height + 1.1), layout='constrained')
+        points = np.vstack([g.all_points() for g in [pose] + [g for _, g in ghosts]])
+        extent = np.ptp(points @ basis.T, axis=0)
+        extent = extent + 2.0 * PAD * max(float(extent.max()), 1e-9)   # as _View2D.finish
+        height = min(max(6.6 * extent[1] / extent[0], 2.0), 6.4)   # the axes, in inches
+        fig = Figure(figsize=(8.0, height + 2.0), layout='constrained')
         ax = fig.add_subplot()
         view = _View2D(ax, basis, normal)
         ax.set_xlabel(labels[0])
@@ -215,11 +218,7 @@ def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=
     view.finish([pose.all_points()] + [g.all_points() for _, g in ghosts]
                 + [pose.base_points])
     handles = _legend_handles(mech, pose, ghosts)
-    if kind == 'planar':
-        ax.legend(handles=handles, loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize=8,
-                  borderaxespad=0.0)
-    else:
-        fig.legend(handles=handles, loc='outside lower center', ncols=3, fontsize=8)
+    fig.legend(handles=handles, loc='outside lower center', ncols=3, fontsize=8)
     loops = len(mech.model.loops)
     heading = title or (f"{mech.name}: {mech.dof} DOF, {len(mech.links)} links, {loops} "
                         f"loop{'' if loops == 1 else 's'} ({kind}), assembled pose")
@@ -274,8 +273,8 @@ def _legend_handles(mech, pose, ghosts):
                               markersize=7, label='spherical / universal / fixed'))
     if ghosts:
         handles.append(Line2D([], [], color='gray', lw=1.5, alpha=0.4,
-                              label='snapshots t = ' + ', '.join(f'{t:.3g}' for t, _ in ghosts)
-                              + ' s (lighter: earlier)'))
+                              label='snapshots (lighter: earlier)\nt = '
+                              + ', '.join(f'{t:.3g}' for t, _ in ghosts) + ' s'))
     return handles
 
 
@@ -306,7 +305,7 @@ class _View2D:
     def finish(self, point_sets):
         pts = self.xy(np.vstack([p for p in point_sets if len(p)]))
         lo, hi = pts.min(axis=0), pts.max(axis=0)
-        pad = 0.12 * max(float((hi - lo).max()), 1e-9)
+        pad = PAD * max(float((hi - lo).max()), 1e-9)
         self.ax.set_xlim(lo[0] - pad, hi[0] + pad)
         self.ax.set_ylim(lo[1] - pad, hi[1] + pad)
         self.ax.set_aspect('equal', adjustable='box')

@@ -243,6 +243,24 @@ def test_another_branch_is_warned(tmp_path, capsys):
     check_picture(picture)
 
 
+def test_moved_actuators_are_warned(tmp_path, capsys):
+    """Redundant initial positions that disagree with the closure (within
+    setpoint_tolerance): the loader moves the actuators, the report says which."""
+    text = (CONFIG / 'five_bar_redundant.yaml').read_text()
+    given = '1.4154911147693727'
+    assert text.count(given) == 1
+    params = tmp_path / 'inconsistent.yaml'
+    params.write_text(text.replace(given, '1.4159911147693727'))      # j3 off by 5e-4 rad
+    status, out, err = run_main(capsys, '--params-file', params)
+    assert status == 0, err
+    mech = load(params)
+    moved = set(re.findall(r"active joint '(\w+)' from", ' '.join(mech.assembly_warnings)))
+    assert 'j3' in moved
+    warned = set(re.findall(r"^WARNING: active joint '(\w+)' moved", out, re.MULTILINE))
+    assert warned == moved
+    assert 'another branch' not in out          # a small move of the actuators is not that
+
+
 def test_trajectory_snapshots(tmp_path, capsys):
     params = CONFIG / 'paper_four_bar_a.yaml'
     picture = tmp_path / 'motion.png'
