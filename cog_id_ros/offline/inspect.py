@@ -425,7 +425,8 @@ def format_joint_table(mech):
         lines += textwrap.wrap(
             f"The assembly probably went to another branch than meant (another way of "
             f"closing the loops). Look at the picture (--plot); if it is not the pose you "
-            f"mean, set initial_positions of {', '.join(far)} near that pose.", WIDTH,
+            f"mean, set initial_positions near that pose: {', '.join(far)}, and the other "
+            f"passive joints of their loops.", WIDTH,
             initial_indent='  ', subsequent_indent='  ')
     if not warned:
         lines.append(f'no joint moved far at assembly ({_far_text(mech)}): the pose is the one '

@@ -25,6 +25,8 @@ PLANAR_TOLERANCE = 1e-6
 SAME_POINT = 1e-6
 #: margin around the drawing, as a fraction of its size
 PAD = 0.12
+#: and more on the right of a 2-D drawing, where the names are written
+RIGHT = 0.08
 #: joints and links are named on the picture up to these counts
 MAX_JOINT_LABELS = 12
 MAX_LINK_LABELS = 8
@@ -189,9 +191,10 @@ def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=
         basis = np.array([horizontal, up])
         points = np.vstack([g.all_points() for g in [pose] + [g for _, g in ghosts]])
         extent = np.ptp(points @ basis.T, axis=0)
-        extent = extent + 2.0 * PAD * max(float(extent.max()), 1e-9)   # as _View2D.finish
+        extent = extent + np.array([2.0 * PAD + RIGHT, 2.0 * PAD]) * max(float(extent.max()),
+                                                                         1e-9)   # as finish()
         height = min(max(6.6 * extent[1] / extent[0], 2.0), 6.4)   # the axes, in inches
-        fig = Figure(figsize=(8.0, height + 2.0), layout='constrained')
+        fig = Figure(figsize=(8.0, height + 2.4), layout='constrained')
         ax = fig.add_subplot()
         view = _View2D(ax, basis, normal)
         ax.set_xlabel(labels[0])
@@ -306,7 +309,7 @@ class _View2D:
         pts = self.xy(np.vstack([p for p in point_sets if len(p)]))
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         pad = PAD * max(float((hi - lo).max()), 1e-9)
-        self.ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        self.ax.set_xlim(lo[0] - pad, hi[0] + pad + RIGHT * pad / PAD)   # room for labels
         self.ax.set_ylim(lo[1] - pad, hi[1] + pad)
         self.ax.set_aspect('equal', adjustable='box')
         self.ax.grid(True, lw=0.4, alpha=0.5)
