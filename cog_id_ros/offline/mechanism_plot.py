@@ -212,7 +212,6 @@ def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=
     for k, (_, ghost) in enumerate(ghosts):
         alpha = 0.12 + 0.3 * (k + 1) / len(ghosts)
         _draw_links(view, ghost, colors, alpha=alpha, width=1.5, fill=False)
-        _draw_base(view, ghost, alpha=alpha, markers=False)
     _draw_base(view, pose)
     _draw_links(view, pose, colors)
     _draw_cogs(view, pose, colors)
@@ -411,15 +410,16 @@ def _draw_links(view, pose, colors, alpha=1.0, width=None, fill=True):
                       lw=1.2, ls=':', alpha=alpha)
 
 
-def _draw_base(view, pose, alpha=1.0, markers=True):
+def _draw_base(view, pose):
+    """The base link's attachment points (fixed: drawn once, not per snapshot)."""
     base = pose.base_points
     if len(base) >= 3:
         ring = _ordered(base, getattr(view, 'normal', None))
-        view.line(np.vstack([ring, ring[:1]]), color=BASE_COLOR, lw=1.5, ls='--', alpha=alpha)
-        view.polygon(base, '#999999', 0.25 * alpha)
+        view.line(np.vstack([ring, ring[:1]]), color=BASE_COLOR, lw=1.5, ls='--')
+        view.polygon(base, '#999999', 0.25)
     elif len(base) == 2:
-        view.line(base, color=BASE_COLOR, lw=1.5, ls='--', alpha=alpha)
-    if markers and len(base):
+        view.line(base, color=BASE_COLOR, lw=1.5, ls='--')
+    if len(base):
         view.scatter(base, marker='^', s=110, color=BASE_COLOR, zorder=3)
 
 
