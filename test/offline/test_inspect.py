@@ -24,7 +24,9 @@ pytest.importorskip('matplotlib')
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / 'config'
-CONFIGS = ['paper_four_bar_a', 'five_bar_redundant', 'stewart_6ups', 'spatial_rsur']
+# and one with spherical joints, which have no coordinate and always close a loop
+CONFIGS = ['paper_four_bar_a', 'five_bar_redundant', 'stewart_6ups', 'spatial_rsur',
+           'delta_3rus_spherical']
 TARGET = CONFIG / 'paper_four_bar_target.csv'
 UPRIGHT = ('initial_positions: [1.5707963267948966, -1.5707963267948966, 1.5707963267948966, '
            '1.5707963267948966]')
@@ -164,6 +166,9 @@ def test_report_and_picture_match_the_mechanism(name, tmp_path, capsys):
         assert role.startswith('active' if name_j in mech.active_joints else 'passive')
         assert given == pytest.approx(mech.initial_positions[j], rel=1e-5, abs=1e-12)
         assert assembled == pytest.approx(mech.assembled_positions[j], rel=1e-5, abs=1e-12)
+    for spec in mech.closure_specs:
+        assert re.search(rf'^  {spec.name}\s+{spec.kind}\s+passive, closes loop \d+\s+-', out,
+                         re.MULTILINE)
     assert 'WARNING' not in out
     assert 'no joint moved far at assembly' in out
     evaluation = cog_id_ros.InverseDynamics(mech, backend='reference').evaluate(
