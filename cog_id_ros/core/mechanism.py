@@ -425,18 +425,28 @@ class Mechanism:
         return (f'check the geometry (parent_xyz, child_xyz, *_rpy and axis) of the joints of '
                 f'{which}{more}, and initial_positions (the assembly mode)')
 
-    def _report_far_moves(self, start, q):
-        """A note for every passive joint the assembly moved far from initial_positions."""
+    def far_move_limit(self, j):
+        """(limit, unit): a move of joint j at assembly beyond this is reported as far
+        (FAR_ANGLE rad; for a prismatic joint FAR_FRACTION of the mechanism's scale, its
+        largest attachment offset)."""
+        if self.joint_specs[j].revolute:
+            return FAR_ANGLE, 'rad'
+        return FAR_FRACTION * self._attachment_scale(), 'm'
+
+    def _attachment_scale(self):
+        """The largest attachment offset of a joint (m; 1.0 if there is none)."""
         scale = max([math.hypot(*spec.parent_xyz) for spec in self.joint_specs]
                     + [math.hypot(*spec.child_xyz) for spec in self.joint_specs] + [0.0])
-        scale = scale if scale > 0.0 else 1.0
+        return scale if scale > 0.0 else 1.0
+
+    def _report_far_moves(self, start, q):
+        """A note for every passive joint the assembly moved far from initial_positions."""
         held = set(self.active_index)
         far, moved = [], []
         for j, (a, b) in enumerate(zip(start, q)):
             if j in held:
                 continue
-            limit, unit = ((FAR_ANGLE, 'rad') if self.joint_specs[j].revolute
-                           else (FAR_FRACTION * scale, 'm'))
+            limit, unit = self.far_move_limit(j)
             if abs(b - a) > limit:
                 far.append(f"'{self.joints[j]}' from {a:.6g} to {b:.6g} {unit}")
                 moved.append(j)
@@ -444,7 +454,8 @@ class Mechanism:
             self._note(
                 f'closing the loops with the actuators held at initial_positions moved passive '
                 f'joint(s) {", ".join(far)} (more than {FAR_ANGLE:g} rad or {FAR_FRACTION:.0%} of '
-                f'the mechanism scale {scale:.3g} m): the geometry (xyz, rpy, axis) or '
+                f'the mechanism scale {self._attachment_scale():.3g} m): the geometry (xyz, '
+                f'rpy, axis) or '
                 f'initial_positions are probably not what was meant; '
                 f'{self._check_loops_hint(None, moved)}')
 

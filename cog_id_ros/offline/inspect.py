@@ -14,7 +14,6 @@ but the picture. No ROS import. docs/inspect.md has an example.
 """
 
 import argparse
-import math
 import os
 import sys
 import textwrap
@@ -358,18 +357,6 @@ def format_actuation(mech):
     return lines
 
 
-def far_limit(mech, j):
-    """(limit, unit) beyond which the loader reports a move of passive joint j at assembly
-    as far: mechanism.FAR_ANGLE rad, or FAR_FRACTION of the mechanism scale (its largest
-    joint offset) for prismatic joints, as in Mechanism._report_far_moves."""
-    from ..core import mechanism as mechanism_module
-    if mech.joint_types[j] == 'revolute':
-        return mechanism_module.FAR_ANGLE, 'rad'
-    scale = max([math.hypot(*xyz) for spec in mech.joint_specs
-                 for xyz in (spec.parent_xyz, spec.child_xyz)] + [0.0]) or 1.0
-    return mechanism_module.FAR_FRACTION * scale, 'm'
-
-
 def joint_rows(mech):
     """Per joint with a coordinate: (name, type, role, given, assembled, unit, warning or
     None); role is 'active', 'active, redundant' or 'passive' (', closes loop k' added)."""
@@ -391,7 +378,7 @@ def joint_rows(mech):
                            f'entry disagrees with the loop closure')
         else:
             role = 'passive'
-            limit, _ = far_limit(mech, j)
+            limit, _ = mech.far_move_limit(j)
             if moved > limit:
                 warning = (f"passive joint '{name}' moved from {_value(given)} to "
                            f"{_value(assembled)} "
@@ -453,7 +440,7 @@ def _far_text(mech):
     text = f'threshold {mechanism_module.FAR_ANGLE:g} rad'
     prismatic = [j for j, kind in enumerate(mech.joint_types) if kind == 'prismatic']
     if prismatic:
-        text += f', {far_limit(mech, prismatic[0])[0]:.3g} m'
+        text += f', {mech.far_move_limit(prismatic[0])[0]:.3g} m'
     return text
 
 
