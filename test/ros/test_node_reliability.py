@@ -281,7 +281,9 @@ def test_too_long_a_trajectory_is_rejected_with_a_reason(ros_process, probe_for)
     q = np.full((101, 1), 1.4)
     probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
     probe.trajectories.publish(make_trajectory(['joint3'], q[:100], q[:100] * 0, q[:100] * 0))
-    assert wait_until(lambda: probe.effort_trajectories)
+    # (an upper bound: the node's trajectory process starts beside it, a new Python that
+    # imports and loads the kernels; under a loaded machine that has taken over 20 s)
+    assert wait_until(lambda: probe.effort_trajectories, timeout=90), proc.output
     assert len(probe.effort_trajectories[0].points) == 100
     kv = wait_values(probe, lambda kv: kv['trajectories_rejected.too_long'] != '0')
     assert kv['trajectories_rejected.too_long'] == '1', (kv, proc.output)
