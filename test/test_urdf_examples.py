@@ -34,6 +34,7 @@ from cog_id_ros.core import kinematics as kin
 from cog_id_ros.core import spatial as sp
 from cog_id_ros.core.kinematics import BASE
 from cog_id_ros.params_file import load_params_file
+from cog_id_ros.urdf_input import rpy_matrix, rpy_of
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CONFIG = os.path.join(os.path.dirname(HERE), 'config')
@@ -66,31 +67,12 @@ def native_configs():
 # --- the exporter ----------------------------------------------------------------------------
 
 
-def _rpy_matrix(rpy):
-    """URDF roll-pitch-yaw (the native schema's too): R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr = math.cos(rpy[0]), math.sin(rpy[0])
-    cp, sp = math.cos(rpy[1]), math.sin(rpy[1])
-    cy, sy = math.cos(rpy[2]), math.sin(rpy[2])
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def _rpy_of(rotation):
-    """Roll, pitch, yaw of a rotation matrix; roll is read from what yaw and pitch leave, so
-    it keeps its digits near +-90 degrees of pitch too."""
-    yaw = math.atan2(rotation[1, 0], rotation[0, 0])
-    pitch = math.atan2(-rotation[2, 0], math.hypot(rotation[0, 0], rotation[1, 0]))
-    rest = _rpy_matrix((0.0, pitch, yaw)).T @ rotation
-    return math.atan2(rest[2, 1], rest[1, 1]), pitch, yaw
-
-
 def _frame(xyz, rpy):
     """(R, t) of an attachment frame in its link's frame; None for the identity (so values
     that need no re-expression pass through exactly as written)."""
     if not any(xyz) and not any(rpy):
         return None
-    return _rpy_matrix(rpy), np.array(xyz, dtype=float)
+    return rpy_matrix(rpy), np.array(xyz, dtype=float)
 
 
 def _express(new, xyz, rpy):
@@ -100,7 +82,7 @@ def _express(new, xyz, rpy):
         return [float(x) for x in xyz], [float(x) for x in rpy]
     rotation, origin = new
     return (list(rotation.T @ (np.array(xyz, dtype=float) - origin)),
-            list(_rpy_of(rotation.T @ _rpy_matrix(rpy))))
+            list(rpy_of(rotation.T @ rpy_matrix(rpy))))
 
 
 def _numbers(values):
@@ -320,7 +302,7 @@ def test_urdfdom_reads_the_exported_urdf_as_the_same_bodies(config):
                 rotation, origin = kin.to_base(frames, link, sp.rpy_matrix(rpy), xyz)
                 prefix = f'loop_closures.{name}.{side}'
                 placed = data.oMi[body[urdf_params[prefix]]] * pin.SE3(
-                    _rpy_matrix(urdf_params[prefix + '_rpy']),
+                    rpy_matrix(urdf_params[prefix + '_rpy']),
                     np.array(urdf_params[prefix + '_xyz']))
                 np.testing.assert_allclose(placed.translation, origin,
                                            rtol=0.0, atol=POSITION_TOLERANCE)
