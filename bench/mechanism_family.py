@@ -151,14 +151,23 @@ def ups_layout(k, g=UPS):
     return base, plat
 
 
-def ups_platform(k=6, g=UPS, name=None, spherical_closures=False):
+def _universal(p, name, parent, child, parent_xyz, parent_rpy):
+    """A native U joint: about x of the attachment frame (parent side), then about y."""
+    _joint(p, name, parent, child, 'universal', parent_xyz=parent_xyz, parent_rpy=parent_rpy,
+           axis=(1.0, 0.0, 0.0))
+    p[f'joints.{name}.axis2'] = [0.0, 1.0, 0.0]
+
+
+def ups_platform(k=6, g=UPS, name=None, spherical_closures=False, native=False):
     """Parameter dict of a platform on k UPS legs (see the module docstring); the joints of
     leg i are l<i>_u1, l<i>_u2 (U: about x, then y of a frame whose z is the leg's home
     direction), l<i>_p (prismatic along the leg, q = leg length - 0.8 m), l<i>_s1..s3 (S:
     about x, y, z; the platform-side frame is the leg's home frame, so the three angles are
     0 at home, rounding aside). ``spherical_closures``: the S of legs 1..k-1 is one
     ``spherical`` joint l<i>_s (no helper links, no coordinate); leg 0 keeps its three
-    revolute joints, the platform's path through the tree."""
+    revolute joints, the platform's path through the tree. ``native``: every U and S is one
+    ``universal`` / ``spherical`` joint (l<i>_u, l<i>_s), no helper link at all; the only
+    coordinates are the legs' prismatic joints."""
     base, plat = ups_layout(k, g)
     home = np.array([0.0, 0.0, g['height']])
     p = {'mechanism.name': name or f'ups_platform_{k}', 'mechanism.gravity': [0.0, 0.0, -9.81],
@@ -172,25 +181,30 @@ def ups_platform(k=6, g=UPS, name=None, spherical_closures=False):
         # the leg's home frame: z along the leg, rounded angles (the IK absorbs the rounding)
         rpy = _r([0.0, math.acos(d[2]), math.atan2(d[1], d[0])])
         frames.append(rpy)
-        _link(p, f'{leg}_cross', 0.0)
         # lower leg: cylinder 0.4 m, 3 kg, valve block off the axis
         _link(p, f'{leg}_lower', 3.0, (0.004, 0.0, 0.2), (0.0410, 0.0412, 0.0030, 0.0, 0.0002, 0.0))
         # upper leg: rod 0.5 m, 1.5 kg, hanging below the S centre
         _link(p, f'{leg}_upper', 1.5, (0.0, 0.0, -0.25), (0.0315, 0.0315, 0.0006, 0.0, 0.0, 0.0))
-        _joint(p, f'{leg}_u1', 'ground', f'{leg}_cross', parent_xyz=base[i],
-               parent_rpy=rpy, axis=(1.0, 0.0, 0.0))
-        _joint(p, f'{leg}_u2', f'{leg}_cross', f'{leg}_lower', axis=(0.0, 1.0, 0.0))
+        if native:
+            _universal(p, f'{leg}_u', 'ground', f'{leg}_lower', base[i], rpy)
+            ul, uj = [], [f'{leg}_u']
+        else:
+            _link(p, f'{leg}_cross', 0.0)
+            _joint(p, f'{leg}_u1', 'ground', f'{leg}_cross', parent_xyz=base[i],
+                   parent_rpy=rpy, axis=(1.0, 0.0, 0.0))
+            _joint(p, f'{leg}_u2', f'{leg}_cross', f'{leg}_lower', axis=(0.0, 1.0, 0.0))
+            ul, uj = [f'{leg}_cross'], [f'{leg}_u1', f'{leg}_u2']
         _joint(p, f'{leg}_p', f'{leg}_lower', f'{leg}_upper', 'prismatic',
                parent_xyz=(0.0, 0.0, g['lower_length']), child_xyz=(0.0, 0.0, -g['upper_length']))
-        if spherical_closures and i > 0:
+        if native or spherical_closures and i > 0:
             _joint(p, f'{leg}_s', f'{leg}_upper', 'platform', 'spherical', child_xyz=plat[i])
             del p[f'joints.{leg}_s.axis']
             sl, sj = [], [f'{leg}_s']
         else:
             sl, sj = _spherical(p, leg, f'{leg}_upper', 'platform', (0.0, 0.0, 0.0),
                                 plat[i], rpy)
-        links += [f'{leg}_cross', f'{leg}_lower', f'{leg}_upper'] + sl
-        joints += [f'{leg}_u1', f'{leg}_u2', f'{leg}_p'] + sj
+        links += ul + [f'{leg}_lower', f'{leg}_upper'] + sl
+        joints += uj + [f'{leg}_p'] + sj
         active.append(f'{leg}_p')
     if k < 6:
         active = [j for i in range(k) for j in (f'l{i}_u1', f'l{i}_p')]
@@ -201,7 +215,7 @@ def ups_platform(k=6, g=UPS, name=None, spherical_closures=False):
     p['mechanism.joints'] = joints
     p['mechanism.active_joints'] = active
     geometry = dict(base=base, platform=plat, frames=frames, home=home, g=g, k=k,
-                    spherical_closures=spherical_closures)
+                    spherical_closures=spherical_closures, native=native)
     p['mechanism.initial_positions'] = ups_ik(geometry, home, np.eye(3))
     return p, geometry
 
@@ -216,9 +230,13 @@ def ups_ik(geometry, position, rotation):
         length = float(np.linalg.norm(u))
         q1, q2, r_leg = universal_angles(rf, u / length)
         s = spherical_angles(r_leg.T @ rotation @ rf)
+        extension = length - g['lower_length'] - g['upper_length']
+        if geometry.get('native'):           # U and S joints have no coordinate
+            out.append(extension)
+            continue
         if geometry.get('spherical_closures') and out:
             s = []                           # a spherical joint has no coordinate
-        out += [q1, q2, length - g['lower_length'] - g['upper_length'], *s]
+        out += [q1, q2, extension, *s]
     return [float(x) for x in out]
 
 
@@ -238,12 +256,14 @@ def delta_arm_angle(g, phi, pos):
     return math.atan2(z, a) + math.acos(k / (2.0 * g['arm'] * rho))
 
 
-def delta_robot(g=DELTA, name='delta_3rus', spherical_closures=False):
+def delta_robot(g=DELTA, name='delta_3rus', spherical_closures=False, native=False):
     """Parameter dict of the delta robot (module docstring). Leg i at azimuth 120 i deg:
     l<i>_arm_joint (active, about the leg frame's y: positive = arm down), rods r<i>a, r<i>b
     each with a U (about x then y of a frame whose x is the elbow axis and z the rod's home
     direction) at the elbow and an S at the platform. ``spherical_closures``: the S of every
-    rod but r0a is one ``spherical`` joint r<i><s>_s (no helper links, no coordinate)."""
+    rod but r0a is one ``spherical`` joint r<i><s>_s (no helper links, no coordinate).
+    ``native``: every U and S is one ``universal`` / ``spherical`` joint (r<i><s>_u,
+    r<i><s>_s), no helper link at all; the only coordinates are the three arm angles."""
     p = {'mechanism.name': name, 'mechanism.gravity': [0.0, 0.0, -9.81],
          'mechanism.base_link': 'ground'}
     links, joints, active, legs = [], [], [], []
@@ -274,13 +294,18 @@ def delta_robot(g=DELTA, name='delta_3rus', spherical_closures=False):
             att = np.column_stack([xa, np.cross(za, xa), za])
             att_rpy = _r(matrix_rpy(att))
             rod_rpy = _r(matrix_rpy(r_arm @ rpy_matrix(att_rpy)))
-            _link(p, f'{rod}_cross', 0.0)
             # rod: 0.7 m carbon tube with two ball cups, 0.04 kg
             _link(p, rod, 0.04, (0.0, 0.0, 0.35), (1.64e-3, 1.64e-3, 2.0e-6, 0.0, 0.0, 0.0))
-            _joint(p, f'{rod}_u1', arm, f'{rod}_cross', parent_xyz=top_local,
-                   parent_rpy=att_rpy, axis=(1.0, 0.0, 0.0))
-            _joint(p, f'{rod}_u2', f'{rod}_cross', rod, axis=(0.0, 1.0, 0.0))
-            if spherical_closures and rod != 'r0a':
+            if native:
+                _universal(p, f'{rod}_u', arm, rod, top_local, att_rpy)
+                ul, uj = [], [f'{rod}_u']
+            else:
+                _link(p, f'{rod}_cross', 0.0)
+                _joint(p, f'{rod}_u1', arm, f'{rod}_cross', parent_xyz=top_local,
+                       parent_rpy=att_rpy, axis=(1.0, 0.0, 0.0))
+                _joint(p, f'{rod}_u2', f'{rod}_cross', rod, axis=(0.0, 1.0, 0.0))
+                ul, uj = [f'{rod}_cross'], [f'{rod}_u1', f'{rod}_u2']
+            if native or spherical_closures and rod != 'r0a':
                 _joint(p, f'{rod}_s', rod, 'platform', 'spherical',
                        parent_xyz=(0.0, 0.0, g['rod']), child_xyz=plat_local)
                 del p[f'joints.{rod}_s.axis']
@@ -288,8 +313,8 @@ def delta_robot(g=DELTA, name='delta_3rus', spherical_closures=False):
             else:
                 sl, sj = _spherical(p, rod, rod, 'platform', (0.0, 0.0, g['rod']),
                                     plat_local, rod_rpy)
-            links += [f'{rod}_cross', rod] + sl
-            joints += [f'{rod}_u1', f'{rod}_u2'] + sj
+            links += ul + [rod] + sl
+            joints += uj + sj
             rods.append(dict(top=top_local, plat=plat_local, att=att_rpy, crpy=rod_rpy))
         legs.append(dict(phi=phi, pivot=pivot, rods=rods))
     # platform: 0.5 kg, tool flange below the centre
@@ -298,7 +323,8 @@ def delta_robot(g=DELTA, name='delta_3rus', spherical_closures=False):
     p['mechanism.links'] = links
     p['mechanism.joints'] = joints
     p['mechanism.active_joints'] = active
-    geometry = dict(g=g, legs=legs, home=home, spherical_closures=spherical_closures)
+    geometry = dict(g=g, legs=legs, home=home, spherical_closures=spherical_closures,
+                    native=native)
     p['mechanism.initial_positions'] = delta_ik(geometry, home)
     return p, geometry
 
@@ -311,6 +337,8 @@ def delta_ik(geometry, pos):
         theta = delta_arm_angle(g, leg['phi'], pos)
         r_arm = rot_z(leg['phi']) @ rot_y(theta)
         out.append(theta)
+        if geometry.get('native'):           # U and S joints have no coordinate
+            continue
         for rod in leg['rods']:
             d = pos + rod['plat'] - (leg['pivot'] + r_arm @ rod['top'])
             q1, q2, r_rod = universal_angles(r_arm @ rpy_matrix(rod['att']), d / np.linalg.norm(d))
@@ -456,39 +484,38 @@ DELTA_HEADER = """\
 
 
 STEWART_SPHERICAL_HEADER = """\
-# Stewart-Gough platform 6-UPS with SPHERICAL JOINTS: config/stewart_6ups.yaml with the S of
-# legs 1-5 written as one `type: spherical` joint each (l<i>_s: the upper leg's origin, the S
-# centre, held at the platform point c_i) instead of three revolute joints through two
-# massless helper links. Written by bench/mechanism_family.py (ups_platform(6,
-# spherical_closures=True); `--write-configs` rewrites this file).
-# A spherical joint has no coordinate: it only closes a loop (3 equations: the two points
-# coincide), so it has no entry in initial_positions or any JointState, and no angle to lock.
-# Leg 0 keeps its three revolute S joints: the platform needs one path of joints with
-# coordinates to the base (docs/mechanism.md, "Spherical, universal and fixed joints"); its
-# middle angle stays within +-0.16 rad over the test motion.
-# The U joints stay two revolute joints through a massless cross: a U joint between the
-# base and a leg is on the leg's only path to the base (a universal joint that closes a loop
-# can be written as `type: universal`).
+# Stewart-Gough platform 6-UPS with NATIVE SPHERICAL AND UNIVERSAL JOINTS: the mechanism of
+# config/stewart_6ups.yaml with every U written as one `type: universal` joint (l<i>_u:
+# about x of the attachment frame, whose z is the leg's home direction, then about y) and
+# every S as one `type: spherical` joint (l<i>_s: the upper leg's origin, the S centre, at
+# the platform point c_i), instead of revolute joints through massless helper links.
+# Written by bench/mechanism_family.py (ups_platform(6, native=True); `--write-configs`
+# rewrites this file).
+# Spherical and universal joints have no entry in initial_positions or any JointState and no
+# angle that could lock. The solver puts the U joints and one S joint into its spanning tree
+# (hidden coordinates: two angles per U, a quaternion for the S) and closes the other five
+# loops with the S joints (3 equations each); docs/mechanism.md says how. The platform is
+# described in its home orientation (frame parallel to the base), where the solver starts it.
 # Same masses, geometry and test motion as stewart_6ups.yaml, hence the same torques.
-# DOF: 6 x 3 + 3 = 21 joint coordinates on 21 moving links; 5 loops of 3 equations:
-# 21 - 15 = 6.
+# DOF: 6 prismatic joints + 6 U x 2 + one S quaternion (4, and |q| = 1) = 22 coordinates;
+# 5 loops of 3 equations + 1: 22 - 16 = 6.
 """
 
 
 DELTA_SPHERICAL_HEADER = """\
-# Delta robot with SPHERICAL JOINTS: config/delta_3rus.yaml with the S of every rod but r0a
-# written as one `type: spherical` joint (r<i><s>_s: the rod's far end held at its platform
-# point) instead of three revolute joints through two massless helper links. Written by
-# bench/mechanism_family.py (delta_robot(spherical_closures=True); `--write-configs`
-# rewrites this file).
-# A spherical joint has no coordinate: it only closes a loop (3 equations), so it has no
-# entry in initial_positions or any JointState, and no angle to lock. Rod r0a keeps its three
-# revolute S joints: the platform needs one path of joints with coordinates to the base.
-# The U joints at the elbows stay two revolute joints through a massless cross (each is on
-# its rod's only path to the base).
+# Delta robot with NATIVE SPHERICAL AND UNIVERSAL JOINTS: the mechanism of
+# config/delta_3rus.yaml with every rod's elbow U written as one `type: universal` joint
+# (r<i><s>_u: about the elbow axis, then about y) and its platform S as one
+# `type: spherical` joint (r<i><s>_s: the rod's far end at its platform point), instead of
+# revolute joints through massless helper links. Written by bench/mechanism_family.py
+# (delta_robot(native=True); `--write-configs` rewrites this file).
+# Spherical and universal joints have no entry in initial_positions or any JointState and no
+# angle that could lock: initial_positions holds the three arm angles only. The solver puts
+# the U joints and one S joint into its spanning tree (hidden coordinates) and closes the
+# other five loops with the S joints; docs/mechanism.md says how.
 # Same masses, geometry and test motion as delta_3rus.yaml, hence the same torques.
-# DOF: 3 arm joints + 6 U joints x 2 + the 3 S joints of r0a = 18 joint coordinates on 18
-# moving links; 5 spherical joints close 5 loops of 3 equations: 18 - 15 = 3.
+# DOF: 3 arm joints + 6 U x 2 + one S quaternion (4, and |q| = 1) = 19 coordinates; 5 loops
+# of 3 equations + 1: 19 - 16 = 3.
 """
 
 
@@ -497,10 +524,10 @@ def write_examples():
     write_yaml(ups_platform(6, name='stewart_6ups')[0],
                os.path.join(REPO, 'config', 'stewart_6ups.yaml'), STEWART_HEADER)
     write_yaml(delta_robot()[0], os.path.join(REPO, 'config', 'delta_3rus.yaml'), DELTA_HEADER)
-    write_yaml(ups_platform(6, name='stewart_6ups_spherical', spherical_closures=True)[0],
+    write_yaml(ups_platform(6, name='stewart_6ups_spherical', native=True)[0],
                os.path.join(REPO, 'config', 'stewart_6ups_spherical.yaml'),
                STEWART_SPHERICAL_HEADER)
-    write_yaml(delta_robot(name='delta_3rus_spherical', spherical_closures=True)[0],
+    write_yaml(delta_robot(name='delta_3rus_spherical', native=True)[0],
                os.path.join(REPO, 'config', 'delta_3rus_spherical.yaml'), DELTA_SPHERICAL_HEADER)
 
 

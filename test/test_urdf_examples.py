@@ -53,13 +53,18 @@ SLOW_SAMPLES = 20
 SLOW = ('stewart', 'delta')
 
 
-def native_configs():
+def native_configs(urdf_tree=True):
     """Names of the config/*.yaml files in the native schema (no robot_description, no
-    mechanism.urdf_file)."""
+    mechanism.urdf_file) whose spanning tree a URDF can hold (``urdf_tree``: revolute and
+    prismatic joints only), or else those whose tree holds a universal or spherical joint
+    (no URDF joint type: such a robot goes to URDF as its helper-link twin)."""
     names = []
     for path in sorted(glob.glob(os.path.join(CONFIG, '*.yaml'))):
         params = load_params_file(path)
-        if 'robot_description' not in params and 'mechanism.urdf_file' not in params:
+        if 'robot_description' in params or 'mechanism.urdf_file' in params:
+            continue
+        tree = Mechanism.from_parameters(params).model.edges
+        if all(e.kind in ('revolute', 'prismatic') for e in tree) == urdf_tree:
             names.append(os.path.basename(path))
     return names
 
@@ -246,10 +251,14 @@ def test_urdf_form_gives_the_native_torques_and_positions(config):
 def test_every_native_example_is_exported():
     """The parametrisation above covers every native config (none is left out quietly)."""
     names = native_configs()
-    assert len(names) >= 11
+    assert len(names) >= 9
     assert 'crank_rocker_urdf.yaml' not in names
     for name in names:
         assert name in trajectories.TRAJECTORIES, f'{name} has no test motion'
+    # the others have a helper-link twin that is exported (the same mechanism)
+    others = native_configs(urdf_tree=False)
+    assert set(others) <= set(trajectories.TWINS), others
+    assert {trajectories.TWINS[name] for name in others} <= set(names)
 
 
 @pytest.mark.parametrize('config', native_configs())

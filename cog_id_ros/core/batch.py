@@ -102,8 +102,8 @@ class Batch:
                 if on_invalid == 'raise':
                     raise errors[i]
         tau[~ok] = 0.0
-        return Evaluation(tau, ok, errors, positions, positions[:, m.active_index], residual,
-                          condition), new_state
+        return Evaluation(tau, ok, errors, positions[:, :len(m.joints)],
+                          positions[:, m.active_index], residual, condition), new_state
 
     def positions(self, state, qa, on_invalid, invalid=None, qd=None, qdd=None):
         """Solve N samples of active coordinates ``qa`` (N, M) from the warm start ``state``.
@@ -115,7 +115,7 @@ class Batch:
         qd = np.zeros_like(qa) if qd is None else qd
         qdd = np.zeros_like(qa) if qdd is None else qdd
         if n == 0:
-            empty = np.zeros((0, len(m.joints)))
+            empty = np.zeros((0, m.n_coordinates))
             flat = self.kernels.dynamics_many(empty, qa, qd, qdd)
             return self.record(flat), empty, np.zeros(0, bool), [], state
         invalid = np.zeros(n, bool) if invalid is None else invalid
@@ -245,7 +245,7 @@ class Batch:
     def basis(self, record):
         """The velocity basis V of every sample, (N, n_joints, dof)."""
         m = self.mechanism
-        basis = np.zeros((len(record.basis), len(m.joints), m.dof))
+        basis = np.zeros((len(record.basis), m.n_coordinates, m.dof))
         basis[:, m.free_joints] = record.basis
         for k, j in enumerate(m.primary_joints):
             basis[:, j, k] = 1.0
@@ -349,7 +349,7 @@ class _Bases:
         if i in self.solved:
             return self.solved[i]
         m = self.mechanism
-        basis = np.zeros((len(m.joints), m.dof))
+        basis = np.zeros((m.n_coordinates, m.dof))
         basis[m.free_joints] = self.free_rows[i]
         for k, j in enumerate(m.primary_joints):
             basis[j, k] = 1.0

@@ -8,6 +8,9 @@ equations per loop, written at the closure point x (the child attachment origin)
     Phi_c = [ x - (o + q_c a) (prismatic only);  1/2 sum_k rP_k x rC_k ]       (position)
     A_c qdot = [ v_C(x) - v_P(x) - q_c' a (prismatic);  w_C - w_P - q_c' a (revolute) ] = 0
 
+A spherical joint in the tree (kinematics.py) adds one equation, |q|^2 - 1 = 0 on its
+quaternion (a ``unit`` constraint, its other five rows zero), velocity row 2 q . qdot.
+
 Joints without a coordinate close loops with fewer equations, written in the same six rows
 (the others are zero): ``spherical`` only the position rows, x - o (the two attachment
 origins coincide); ``universal`` also a . b = 0 in the first orientation row (a the axis in
@@ -38,9 +41,16 @@ class LoopState:
 
 
 def loop_closure(model, frames, q, ops):
-    """Residuals of every loop at configuration q (frames from forward_kinematics)."""
+    """Residuals of every constraint at configuration q (frames from forward_kinematics)."""
     states = []
-    for lp in model.loops:
+    for lp in model.constraints:
+        if lp.kind == 'unit':                    # a tree quaternion: |q|^2 = 1
+            st = LoopState()
+            st.x = tuple(q[c] for c, _ in lp.cycle)
+            st.residual = (sum(v * v for v in st.x) - 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            st.cosine = 1.0
+            states.append(st)
+            continue
         if lp.joint is None:                     # spherical, universal, fixed: held at rest
             r_moved, t_moved = lp.d0, lp.t_pj
         elif lp.revolute:
@@ -70,11 +80,16 @@ def loop_closure(model, frames, q, ops):
 
 
 def closure_jacobian_columns(model, frames, loops):
-    """A as a list of columns (one per joint, each a list of 6 L lanes; rows [v(x); w])."""
-    n_rows = 6 * len(model.loops)
-    columns = [[0.0] * n_rows for _ in range(model.n_joints)]
-    for li, (lp, st) in enumerate(zip(model.loops, loops)):
+    """A as a list of columns (one per coordinate, each a list of 6 L lanes; rows [v(x); w]
+    of every constraint)."""
+    n_rows = 6 * len(model.constraints)
+    columns = [[0.0] * n_rows for _ in range(model.n_coordinates)]
+    for li, (lp, st) in enumerate(zip(model.constraints, loops)):
         row = 6 * li
+        if lp.kind == 'unit':
+            for (c, _), v in zip(lp.cycle, st.x):
+                columns[c][row] = 2.0 * v
+            continue
         entries = list(lp.cycle) + ([] if lp.joint is None else [(lp.joint, -1.0)])
         normal = sp.cross(st.b, st.a) if lp.kind == 'universal' else None
         for j, sign in entries:
@@ -91,7 +106,11 @@ def closure_jacobian_columns(model, frames, loops):
 def closure_bias(model, frames, loops, twists, bias_acc, qdot):
     """beta with A qddot + beta = 0: the closure equations differentiated twice at qddot = 0."""
     beta = []
-    for lp, st in zip(model.loops, loops):
+    for lp, st in zip(model.constraints, loops):
+        if lp.kind == 'unit':                    # d2/dt2 |q|^2 = 2 q . qddot + 2 |qdot|^2
+            beta.extend((2.0 * sum(qdot[c] * qdot[c] for c, _ in lp.cycle),
+                         0.0, 0.0, 0.0, 0.0, 0.0))
+            continue
         acc = sp.twist_add_scaled(kin.twist_of(bias_acc, lp.child),
                                   kin.twist_of(bias_acc, lp.parent), -1.0)
         if lp.joint is not None:
@@ -144,9 +163,10 @@ def _closed(sol, tol):
 
 
 def closure_jacobian_matrix(model, q):
-    """A at one configuration as a numpy matrix (6 L x n_joints), for load-time analysis."""
+    """A at one configuration as a numpy matrix (6 constraints x coordinates), for load-time
+    analysis."""
     sol = evaluate(model, list(q), [], sp.ScalarOps)
-    matrix = np.zeros((6 * len(model.loops), model.n_joints))
+    matrix = np.zeros((6 * len(model.constraints), model.n_coordinates))
     for j, col in enumerate(sol.columns):
         matrix[:, j] = col
     return matrix, sol
@@ -160,7 +180,7 @@ def assemble(model, q, tol, fixed=(), max_iter=100, max_step=0.2):
     Returns (q, residual, converged).
     """
     q = [float(x) for x in q]
-    moving = np.array([j not in set(fixed) for j in range(model.n_joints)])
+    moving = np.array([j not in set(fixed) for j in range(model.n_coordinates)])
     residual = 0.0
     for _ in range(max_iter):
         matrix, sol = closure_jacobian_matrix(model, q)
@@ -168,7 +188,7 @@ def assemble(model, q, tol, fixed=(), max_iter=100, max_step=0.2):
         if _closed(sol, tol):
             return q, residual, True
         phi = np.array([r for st in sol.loops for r in st.residual])
-        step = np.zeros(model.n_joints)
+        step = np.zeros(model.n_coordinates)
         step[moving] = np.linalg.lstsq(matrix[:, moving], phi, rcond=1e-12)[0]
         size = np.max(np.abs(step))
         if not np.isfinite(size):

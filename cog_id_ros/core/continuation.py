@@ -55,9 +55,11 @@ def length_scale(mechanism):
 
 
 def joint_step_limits(mechanism, step):
-    """Per joint, the largest motion of one continuation step (rad or m)."""
+    """Per coordinate, the largest motion of one continuation step (rad or m; a
+    quaternion's components move by half the angle: step / 2)."""
     scale = length_scale(mechanism)
-    return [step if kind == 'revolute' else step * scale for kind in mechanism.joint_types]
+    share = {'revolute': step, 'prismatic': step * scale, 'quaternion': step / 2.0}
+    return [share[kind] for kind in mechanism.coordinate_types]
 
 
 def revolute_active(mechanism):

@@ -60,7 +60,7 @@ class InverseDynamics:
     def reset(self) -> None:
         """Forget the previous calls: the next one starts from the assembled initial_positions."""
         m = self.mechanism
-        start = list(m.assembled_positions)
+        start = list(m.assembled_coordinates)
         q, record, _, _ = self._serial.close(start, [start[j] for j in m.active_index],
                                              self._serial.zeros, self._serial.zeros)
         self._state = (list(q), self._serial.basis(record))
@@ -118,7 +118,7 @@ class InverseDynamics:
     def solve_positions(self, q: ArrayLike) -> np.ndarray:
         """Every joint coordinate (mechanism.joints order): (n_joints,) or (N, n_joints)."""
         at = self._poses(q, None)
-        return self._moved_to(at, at.positions)
+        return self._moved_to(at, at.positions[..., :len(self.mechanism.joints)])
 
     def solve_positions_by_name(self, q: ArrayLike) -> Dict[str, Union[float, np.ndarray]]:
         """:meth:`solve_positions` keyed by joint name: {name: coordinate} for every joint of
@@ -142,8 +142,9 @@ class InverseDynamics:
         without ``qd``.
         """
         m, (q, basis) = self.mechanism, self._state
+        n = len(m.joints)                  # (the hidden coordinates are no joint's)
         if qd is None:
-            return list(q), None
+            return list(q[:n]), None
         n_act = len(m.active_joints)
         rates = qd
         if not (type(qd) is list and len(qd) == n_act and        # what the node passes
@@ -160,7 +161,7 @@ class InverseDynamics:
         qdot = combine(active_velocity_map(m, basis, sp.ScalarOps), rates)
         if not all(map(math.isfinite, qdot)):
             raise out_of_range(rates, [], None)
-        return list(q), qdot
+        return list(q[:n]), qdot[:n]
 
     def cog_poses(self, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray]:
         """g_i (eq. 1): (positions (..., n_links, 3), rotations (..., n_links, 3, 3))."""
@@ -221,14 +222,14 @@ class InverseDynamics:
             if on_invalid == 'raise':
                 raise
             positions = np.array([self._state[0]])
-            return Evaluation(np.zeros((1, n_act)), np.array([False]), [exc], positions,
-                              positions[:, m.active_index],
+            return Evaluation(np.zeros((1, n_act)), np.array([False]), [exc],
+                              positions[:, :len(m.joints)], positions[:, m.active_index],
                               np.array([getattr(exc, 'residual', math.inf)]),
                               np.array([getattr(exc, 'condition_number', math.inf)]))
         self._state = state
         positions = np.array([state[0]])
-        return Evaluation(np.array([record.torques]), np.array([True]), [None], positions,
-                          positions[:, m.active_index],
+        return Evaluation(np.array([record.torques]), np.array([True]), [None],
+                          positions[:, :len(m.joints)], positions[:, m.active_index],
                           np.array([max(map(abs, record.residual), default=0.0)]),
                           np.array([record.condition]))
 
@@ -265,7 +266,7 @@ class InverseDynamics:
 
 
 class _Poses(NamedTuple):
-    positions: np.ndarray      # (n_joints,) or (N, n_joints)
+    positions: np.ndarray      # every coordinate (hidden ones too): (n,) or (N, n)
     pose: object               # closure.ClosureSolution on floats or (N,) lanes
     basis: list                # velocity basis V (list over joints)
     rates: list                # thetadot as lanes

@@ -22,7 +22,7 @@ def velocity_basis(mechanism, sol):
     primary = mechanism.primary_joints
     columns = [sol.columns[j] for j in primary]
     t = [sol.lsq.solve(col) for col in columns]           # A_f^+ A_p, column by column
-    basis = [None] * len(mechanism.joints)
+    basis = [None] * mechanism.n_coordinates
     for k, j in enumerate(primary):
         row = [0.0] * len(primary)
         row[k] = 1.0
@@ -80,7 +80,7 @@ def projected_pose(mechanism, q, basis, dz):
 
 def closure_drift(mechanism, sol, velocity_map, beta):
     """d = c - S c_a with A c = -beta, c = 0 on the primary joints (list over joints)."""
-    n = len(mechanism.joints)
+    n = mechanism.n_coordinates
     c = [0.0] * n
     if beta:
         for j, value in zip(mechanism.free_joints, sol.lsq.solve(beta)):

@@ -51,8 +51,8 @@ TRACE_BUDGET = 2500
 
 class ClosureRecord(NamedTuple):
     """The loop equations at a pose q."""
-    residual: tuple     # Phi(q): 6 equations per loop (closure.py)
-    cosines: tuple      # per loop, cosine between its attachment frames (> 0: not a half-turn)
+    residual: tuple     # Phi(q): 6 equations per constraint (closure.py)
+    cosines: tuple      # per constraint, cosine of its frames' angle (> 0: not a half-turn)
     increment: tuple    # A_f^+ Phi, the Newton increment of the free joints (q_f -= increment)
 
 
@@ -103,8 +103,8 @@ def layouts(mechanism):
     """Per kernel, its record's fields and their shapes: () a number, (k,) k numbers,
     (rows, k) rows of k numbers. The order of the flat outputs of the *_many kernels."""
     m = mechanism
-    n, n_free, dof, n_act = len(m.joints), len(m.free_joints), m.dof, len(m.active_joints)
-    n_loops = len(m.model.loops)
+    n, n_free, dof, n_act = m.n_coordinates, len(m.free_joints), m.dof, len(m.active_joints)
+    n_loops = len(m.model.constraints)
     closing = [('residual', (6 * n_loops,)), ('cosines', (n_loops,)), ('increment', (n_free,))]
     return {'prediction': [('predicted', (n,)), ('moved', (n,))],
             'closure': closing,
@@ -173,11 +173,11 @@ def trace(mechanism):
     the emitters (emitter.py) write as code."""
     m = mechanism
     graph = Graph()
-    q = graph.inputs('q', len(m.joints))
+    q = graph.inputs('q', m.n_coordinates)
     target, qd, qdd = (graph.inputs(name, len(m.active_joints))
                        for name in ('target', 'qd', 'qdd'))
-    flat = graph.inputs('basis', len(m.joints) * m.dof)
-    basis = [flat[j * m.dof:(j + 1) * m.dof] for j in range(len(m.joints))]
+    flat = graph.inputs('basis', m.n_coordinates * m.dof)
+    basis = [flat[j * m.dof:(j + 1) * m.dof] for j in range(m.n_coordinates)]
     predicted = prediction_record(m, q, basis, target)
     _, closed = closure_record(m, q, SymOps)
     whole = pose_record(m, q, target, qd, qdd, SymOps)

@@ -7,8 +7,21 @@ either direction: the edge remembers a sign so that the joint coordinate keeps i
 
 Every revolute or prismatic joint, tree or loop-closing, has a coordinate of the model; the
 loop-closing ones are tied to the others by the closure equations (closure.py). Spherical,
-universal and fixed joints have no coordinate: they always close a loop, and their closure
-equations hold the two attachment frames together (closure.py says how).
+universal and fixed joints have no coordinate of their own: they close loops where they can
+(their closure equations hold the two attachment frames together, closure.py), and enter
+the tree only where a link cannot be reached otherwise (fixed first, then universal, then
+spherical), with *hidden* coordinates that no output shows:
+
+* fixed: none, a constant transform;
+* universal: two angles, about ``axis`` and then ``axis2``, through a massless virtual link
+  (the cross); the two axes stay perpendicular, so the pair never locks;
+* spherical: a quaternion (w, x, y, z), the rotation of the child attachment frame in the
+  parent attachment frame, R = R_h(q) / |q|^2, whose rates give the angular velocity
+  2 G(q) qdot / |q|^2 (no angle triple, so no gimbal lock anywhere); one extra closure
+  equation, |q|^2 = 1, takes up the fourth coordinate (a ``unit`` constraint).
+
+Model coordinates are the mechanism's revolute and prismatic joints in order, then the hidden
+ones; a velocity basis, a Newton increment or a step limit has one entry per coordinate.
 """
 from collections import deque
 from dataclasses import dataclass, field
@@ -17,11 +30,15 @@ from . import spatial as sp
 from .errors import MechanismConfigError
 
 BASE = -1
+ZERO3 = (0.0, 0.0, 0.0)
 
 
 #: joint types with one coordinate, and those that only close loops (no coordinate)
 COORDINATE_TYPES = ('revolute', 'prismatic')
 CLOSURE_TYPES = ('spherical', 'universal', 'fixed')
+#: which of them enters the tree first where a link is out of reach otherwise (fewest
+#: hidden coordinates first)
+TREE_PREFERENCE = ('fixed', 'universal', 'spherical')
 
 
 @dataclass
@@ -52,8 +69,11 @@ class TreeEdge:
     side) and M the joint motion. For a revolute joint with K = skew(axis):
       R_L = r0 + sin(q) r1 + (1 - cos q) r2,  t_L = t0 + sin(q) t1 + (1 - cos q) t2
     and for a prismatic one R_L = r0, t_L = t0 + q t1. The sign is folded into r1, t1.
+    A fixed edge (``kind`` 'fixed') is r0, t0 alone; a spherical one ('ball') is
+    A R(q) B with the quaternion coordinates ``coords`` (r1 = B's rotation, t1 = B's
+    translation). ``joint`` is the coordinate of a revolute or prismatic edge (None else).
     """
-    joint: int
+    joint: 'int | None'
     parent: int
     child: int
     sign: float
@@ -66,6 +86,15 @@ class TreeEdge:
     t2: tuple
     axis_p: tuple        # joint axis in the tree-parent link frame
     origin_p: tuple      # a point of the joint axis in the tree-parent link frame
+    kind: str = ''       # 'revolute', 'prismatic', 'fixed' or 'ball'
+    coords: tuple = ()   # the coordinates of the edge (one, none, or a quaternion's four)
+    name: str = ''       # the declared joint it comes from
+
+    def __post_init__(self):
+        if not self.kind:
+            self.kind = 'revolute' if self.revolute else 'prismatic'
+        if not self.coords and self.joint is not None:
+            self.coords = (self.joint,)
 
 
 @dataclass
@@ -95,12 +124,44 @@ class KinematicModel:
     def __init__(self, link_names, joints, closures=()):
         self.link_names = list(link_names)
         self.joints = list(joints)            # joints with a coordinate
-        self.closures = list(closures)        # spherical, universal, fixed: loops only
-        self.n_links = len(self.link_names)
-        self.n_joints = len(self.joints)
-        self.edges, self.loops = [], []
+        self.closures = list(closures)        # spherical, universal, fixed
+        self.n_links = len(self.link_names)   # grows by a virtual link per tree universal joint
+        self.n_joints = len(self.joints)      # the declared joints with a coordinate
+        #: per model coordinate: 'revolute', 'prismatic' or 'quaternion', its name (a hidden
+        #: one: '<joint>.<part>') and the declared joint it belongs to
+        self.coordinate_kinds = [spec.kind for spec in self.joints]
+        self.coordinate_names = [spec.name for spec in self.joints]
+        self.coordinate_joints = [spec.name for spec in self.joints]
+        #: the hidden coordinates' values where their attachment frames coincide
+        self.hidden_start = []
+        self.edges, self.loops, self.units = [], [], []
         self.edge_of_link = [None] * self.n_links
         self._build_tree()
+        self.n_coordinates = len(self.coordinate_kinds)
+        #: every constraint of the closure equations: the loops, then a unit quaternion each
+        self.constraints = self.loops + self.units
+        #: per coordinate, the indices of the constraints whose equations it enters
+        self.loops_of_joint = [[] for _ in range(self.n_coordinates)]
+        for li, lp in enumerate(self.constraints):
+            for j in loop_columns(lp):
+                self.loops_of_joint[j].append(li)
+        self._orders = {}
+
+    def _hidden(self, spec, parts, kind, start):
+        """New hidden coordinates of ``spec`` (one per part); their indices."""
+        first = len(self.coordinate_kinds)
+        for part, value in zip(parts, start):
+            self.coordinate_kinds.append(kind)
+            self.coordinate_names.append(f'{spec.name}.{part}')
+            self.coordinate_joints.append(spec.name)
+            self.hidden_start.append(value)
+        return tuple(range(first, first + len(parts)))
+
+    def _virtual_link(self, name):
+        self.link_names.append(name)
+        self.edge_of_link.append(None)
+        self.n_links += 1
+        return self.n_links - 1
 
     def _build_tree(self):
         """Breadth-first from the base over the joints incident to each link, in the listed
@@ -115,52 +176,116 @@ class KinematicModel:
             incident.setdefault(spec.parent, []).append(j)
             incident.setdefault(spec.child, []).append(j)
         in_tree = [False] * self.n_joints
-        up = {BASE: None}       # link -> (tree joint, tree parent link)
+        closure_in_tree = [False] * len(self.closures)
+        up = {BASE: None}       # link -> (tree edge, tree parent link)
         depth = {BASE: 0}
         queue = deque([BASE])
-        while queue:
-            link = queue.popleft()
-            for j in incident.get(link, ()):
-                if in_tree[j]:
-                    continue
-                spec = self.joints[j]
-                other = spec.child if spec.parent == link else spec.parent
-                if other in up:
-                    continue
-                edge = _tree_edge(j, spec, link, other)
-                self.edge_of_link[other] = len(self.edges)
-                self.edges.append(edge)
-                in_tree[j] = True
-                up[other] = (j, link)
-                depth[other] = depth[link] + 1
-                queue.append(other)
+
+        def grow(edge, link, other):
+            self.edge_of_link[other] = len(self.edges)
+            up[other] = (len(self.edges), link)
+            depth[other] = depth[link] + 1
+            self.edges.append(edge)
+
+        while True:
+            while queue:
+                link = queue.popleft()
+                for j in incident.get(link, ()):
+                    if in_tree[j]:
+                        continue
+                    spec = self.joints[j]
+                    other = spec.child if spec.parent == link else spec.parent
+                    if other in up:
+                        continue
+                    grow(_tree_edge(j, spec, link, other), link, other)
+                    in_tree[j] = True
+                    queue.append(other)
+            # links out of reach of revolute and prismatic joints: through a joint without a
+            # coordinate of its own (the one with fewest hidden coordinates, first listed)
+            reaching = [(TREE_PREFERENCE.index(spec.kind), k) for k, spec in
+                        enumerate(self.closures) if not closure_in_tree[k] and
+                        (spec.parent in up) != (spec.child in up)]
+            if not reaching:
+                break
+            k = min(reaching)[1]
+            closure_in_tree[k] = True
+            queue.append(self._tree_closure(self.closures[k], up, grow))
         missing = [self.link_names[k] for k in range(self.n_links) if k not in up]
         if missing:
-            held = [c.name for c in self.closures
-                    if self.link_names.index(missing[0]) in (c.parent, c.child)]
             raise MechanismConfigError(
                 'mechanism.links',
-                f"link '{missing[0]}' is not connected to the base link by any chain of "
-                f'revolute or prismatic joints' + (
-                    f" (only by {', '.join(held)}: spherical, universal and fixed joints have "
-                    f'no coordinate and only close loops; connect the link by revolute or '
-                    f'prismatic joints, e.g. a universal joint as two revolute joints through '
-                    f'a massless link)' if held else ''))
+                f"link '{missing[0]}' is not connected to the base link by any chain of joints")
         closing = [(j, spec) for j, spec in enumerate(self.joints) if not in_tree[j]]
-        for j, spec in closing + [(None, spec) for spec in self.closures]:
+        closing += [(None, spec) for k, spec in enumerate(self.closures)
+                    if not closure_in_tree[k]]
+        for j, spec in closing:
             loop = _loop_joint(j, spec)
             on_child, on_parent = _paths_below_common_ancestor(up, depth, spec.child,
                                                                spec.parent)
-            loop.cycle = [(i, 1.0) for i in on_child] + [(i, -1.0) for i in on_parent]
+            loop.cycle = self._cycle(on_child, 1.0) + self._cycle(on_parent, -1.0)
             self.loops.append(loop)
-        self.tree_joints = [e.joint for e in self.edges]
+        self.tree_joints = [e.joint for e in self.edges if e.joint is not None]
         self.loop_joints = [lp.joint for lp in self.loops if lp.joint is not None]
-        #: per joint, the indices of the loops whose closure equations it enters
-        self.loops_of_joint = [[] for _ in range(self.n_joints)]
-        for li, lp in enumerate(self.loops):
-            for j in loop_columns(lp):
-                self.loops_of_joint[j].append(li)
-        self._orders = {}
+
+    def start(self, positions):
+        """Every coordinate at the start of assembly: ``positions`` (one per joint), the
+        universal joints' angles at 0 (their attachment frames coincide), and each spherical
+        tree joint turned so that the link it reaches has its frame parallel to the base
+        frame (a link is described in its home orientation; the ball has no angle to give)."""
+        q = list(positions) + list(self.hidden_start)
+        for e in self.edges:
+            if e.kind != 'ball':
+                continue
+            parent = forward_kinematics(self, q, sp.ScalarOps).rot[e.parent] \
+                if e.parent != BASE else sp.IDENTITY
+            turn = sp.mat_mat(sp.mat_mat(sp.transpose(e.r0), sp.transpose(parent)),
+                              sp.transpose(e.r1))
+            for c, value in zip(e.coords, sp.rotation_quaternion(turn)):
+                q[c] = value
+        return q
+
+    def _cycle(self, path, sign):
+        """(coordinate, sign) of every coordinate of the tree edges on ``path``."""
+        return [(c, sign) for e in path for c in self.edges[e].coords]
+
+    def _tree_closure(self, spec, up, grow):
+        """Put a spherical, universal or fixed joint into the tree (from its end that is
+        already reached to the other); returns the link it reaches."""
+        if spec.parent in up:
+            link, other, near, far = spec.parent, spec.child, 'parent', 'child'
+        else:
+            link, other, near, far = spec.child, spec.parent, 'child', 'parent'
+        if spec.kind == 'universal':         # two revolutes through a massless cross
+            cross = self._virtual_link(f'{spec.name}.cross')
+            first, second = self._hidden(spec, ('axis', 'axis2'), 'revolute', (0.0, 0.0))
+            outer = JointSpec(f'{spec.name}', True, spec.parent, cross, spec.parent_xyz,
+                              spec.parent_rpy, ZERO3, ZERO3, spec.axis)
+            inner = JointSpec(f'{spec.name}', True, cross, spec.child, ZERO3, ZERO3,
+                              spec.child_xyz, spec.child_rpy, spec.axis2)
+            hops = ((first, outer, cross), (second, inner, other)) if near == 'parent' else \
+                ((second, inner, cross), (first, outer, other))
+            for coordinate, half, ahead in hops:
+                grow(_tree_edge(coordinate, half, link, ahead), link, ahead)
+                link = ahead
+            return other
+        a = _attachment(spec, near)
+        b = sp.inverse_transform(*_attachment(spec, far))
+        if spec.kind == 'fixed':
+            r0, t0 = sp.compose(a, b)
+            edge = TreeEdge(None, link, other, 1.0, False, r0, sp.IDENTITY, sp.IDENTITY, t0,
+                            ZERO3, ZERO3, ZERO3, a[1], kind='fixed', name=spec.name)
+        else:                                # spherical: a quaternion
+            coords = self._hidden(spec, ('w', 'x', 'y', 'z'), 'quaternion',
+                                  (1.0, 0.0, 0.0, 0.0))
+            edge = TreeEdge(None, link, other, 1.0, False, a[0], b[0], sp.IDENTITY, a[1],
+                            b[1], ZERO3, ZERO3, a[1], kind='ball', coords=coords,
+                            name=spec.name)
+            unit = LoopJoint(None, link, other, False, sp.IDENTITY, sp.IDENTITY, sp.IDENTITY,
+                             ZERO3, ZERO3, sp.IDENTITY, ZERO3, kind='unit', name=spec.name)
+            unit.cycle = [(c, 1.0) for c in coords]
+            self.units.append(unit)
+        grow(edge, link, other)
+        return other
 
     def elimination_order(self, columns):
         """Positions into ``columns`` (joint indices) in the order the closure's least squares
@@ -197,7 +322,15 @@ def _paths_below_common_ancestor(up, depth, a, b):
     return path_a, path_b
 
 
-def _tree_edge(j, spec, tree_parent, tree_child):
+def _attachment(spec, side):
+    """(rotation, translation) of a joint's attachment frame on ``side`` ('parent' or
+    'child') in that link's frame."""
+    if side == 'parent':
+        return sp.rpy_matrix(spec.parent_rpy), tuple(spec.parent_xyz)
+    return sp.rpy_matrix(spec.child_rpy), tuple(spec.child_xyz)
+
+
+def _tree_edge(j, spec, tree_parent, tree_child, name=''):
     r_pj, r_cj = sp.rpy_matrix(spec.parent_rpy), sp.rpy_matrix(spec.child_rpy)
     if spec.parent == tree_parent:   # written from the tree parent outwards
         sign, r_a, t_a, r_c, t_c = 1.0, r_pj, spec.parent_xyz, r_cj, spec.child_xyz
@@ -216,10 +349,11 @@ def _tree_edge(j, spec, tree_parent, tree_child):
         return TreeEdge(j, tree_parent, tree_child, sign, True,
                         sp.mat_mat(r_a, r_b), tuple(sign * x for x in r1), sp.mat_mat(r_ak2, r_b),
                         t0, sp.scale(sp.mat_vec(r_ak, t_b), sign), sp.mat_vec(r_ak2, t_b),
-                        axis_p, tuple(t_a))
+                        axis_p, tuple(t_a), name=name or spec.name)
     return TreeEdge(j, tree_parent, tree_child, sign, False,
                     sp.mat_mat(r_a, r_b), sp.IDENTITY, sp.IDENTITY,
-                    t0, sp.scale(axis_p, sign), sp.ZERO3, axis_p, tuple(t_a))
+                    t0, sp.scale(axis_p, sign), sp.ZERO3, axis_p, tuple(t_a),
+                    name=name or spec.name)
 
 
 def _loop_joint(j, spec):
@@ -288,9 +422,15 @@ def forward_kinematics(model, q, ops):
     frames = Frames()
     rot = [None] * model.n_links
     pos = [None] * model.n_links
-    xi = [None] * model.n_joints
+    xi = [None] * model.n_coordinates
     frames.rot, frames.pos, frames.xi = rot, pos, xi
     for e in model.edges:
+        if e.kind == 'fixed':
+            rot[e.child], pos[e.child] = to_base(frames, e.parent, e.r0, e.t0)
+            continue
+        if e.kind == 'ball':
+            _ball(frames, e, [q[c] for c in e.coords], ops)
+            continue
         qj = q[e.joint]
         if e.revolute:
             s, c1 = ops.sin(qj), 1.0 - ops.cos(qj)
@@ -310,16 +450,32 @@ def forward_kinematics(model, q, ops):
     return frames
 
 
+def _ball(frames, e, quaternion, ops):
+    """Pose of a spherical tree edge's child, A R(q) B, and the twists of its quaternion
+    coordinates: rotations about 2 G(q)[:, k] / |q|^2 (parent attachment frame) through
+    the joint centre, where the angular velocity is 2 G(q) qdot / |q|^2."""
+    rotation, rates = sp.quaternion_rotation(quaternion, ops)
+    r_local = sp.mat_mat(sp.mat_mat(e.r0, rotation), e.r1)
+    t_local = sp.add(e.t0, sp.mat_vec(e.r0, sp.mat_vec(rotation, e.t1)))
+    frames.rot[e.child], frames.pos[e.child] = to_base(frames, e.parent, r_local, t_local)
+    centre = point_to_base(frames, e.parent, e.origin_p)
+    for c, rate in zip(e.coords, rates):
+        axis = vector_to_base(frames, e.parent, sp.mat_vec(e.r0, rate))
+        frames.xi[c] = joint_twist(True, axis, centre)
+
+
 def link_twists(model, frames, qdot):
     """Twist of every link for joint rates qdot (eq. 2 before projection onto the links' COGs)."""
     twists = [None] * model.n_links
     for e in model.edges:
-        xi = frames.xi[e.joint]
-        rate = qdot[e.joint]
-        if e.parent == BASE:
-            twists[e.child] = (sp.scale(xi[0], rate), sp.scale(xi[1], rate))
-        else:
-            twists[e.child] = sp.twist_add_scaled(twists[e.parent], xi, rate)
+        twist = None if e.parent == BASE else twists[e.parent]
+        for c in e.coords:
+            xi, rate = frames.xi[c], qdot[c]
+            if twist is None:
+                twist = (sp.scale(xi[0], rate), sp.scale(xi[1], rate))
+            else:
+                twist = sp.twist_add_scaled(twist, xi, rate)
+        twists[e.child] = sp.ZERO_TWIST if twist is None else twist
     return twists
 
 
@@ -332,12 +488,17 @@ def link_bias_accelerations(model, frames, twists, qdot):
 
     A joint twist is fixed in the inner body, so it changes at the rate twist_parent x xi:
     a_child = a_parent + (v_parent x xi) qdot  (+ xi qddot, added separately).
+    A spherical edge's quaternion twists also change with q, but their rates add up to
+    2 G(qdot) qdot / |q|^2 = 0 (and a term in q . qdot, zero on the unit sphere).
     """
     acc = [None] * model.n_links
     for e in model.edges:
         if e.parent == BASE:
             acc[e.child] = sp.ZERO_TWIST     # the joint twist of a grounded joint is constant
-        else:
-            rate_of_xi = sp.motion_cross(twists[e.parent], frames.xi[e.joint])
-            acc[e.child] = sp.twist_add_scaled(acc[e.parent], rate_of_xi, qdot[e.joint])
+            continue
+        a = acc[e.parent]
+        for c in e.coords:
+            rate_of_xi = sp.motion_cross(twists[e.parent], frames.xi[c])
+            a = sp.twist_add_scaled(a, rate_of_xi, qdot[c])
+        acc[e.child] = a
     return acc

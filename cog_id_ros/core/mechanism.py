@@ -96,6 +96,11 @@ class Mechanism:
         self._read_positions(reader)
         self._reject_unknown(reader)
         self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs)
+        #: the solver's coordinates: the joints (mechanism.joints), then the hidden ones of
+        #: spherical and universal joints in the spanning tree (kinematics.py)
+        self.n_coordinates = self.model.n_coordinates
+        #: per coordinate: 'revolute', 'prismatic' or 'quaternion'
+        self.coordinate_types = list(self.model.coordinate_kinds)
         try:
             self._assemble()
             self._count_degrees_of_freedom()
@@ -360,7 +365,7 @@ class Mechanism:
         self.joint_index = {name: k for k, name in enumerate(self.joints)}
         self.link_index = {name: k for k, name in enumerate(self.links)}
         self.active_index = [self.joint_index[name] for name in self.active_joints]
-        start = self.initial_positions
+        start = self.model.start(self.initial_positions)
         q, residual, ok = closure.assemble(self.model, start, self.closure_tolerance,
                                            fixed=self.active_index)
         if not ok:
@@ -386,7 +391,7 @@ class Mechanism:
                     f'(closure residual {held_residual:.3g}); they close only by moving {what}, '
                     f'more than mechanism.setpoint_tolerance ({self.setpoint_tolerance:g}); '
                     f'{self._check_loops_hint(held_q)}')
-                self.assembled_positions = tuple(q)
+                self._assembled(q)
                 return
             for j in self.active_index:
                 if q[j] != start[j]:
@@ -395,8 +400,13 @@ class Mechanism:
                                f'within mechanism.setpoint_tolerance) to close the loops: the '
                                f"actuators' initial_positions disagree slightly with the loop "
                                f'closure')
-        self.assembled_positions = tuple(q)
+        self._assembled(q)
         self._report_far_moves(start, q)
+
+    def _assembled(self, q):
+        #: every coordinate of the solver at the assembled pose (hidden ones included)
+        self.assembled_coordinates = tuple(q)
+        self.assembled_positions = tuple(q[:len(self.joints)])
 
     def _loops_of(self, q=None):
         """(loop-closing joint, joints of its loop, residual at q or None) of every loop."""
@@ -406,8 +416,9 @@ class Mechanism:
             states = closure.loop_closure(self.model, frames, list(q), sp.ScalarOps)
             residuals = [max(map(abs, st.residual)) for st in states]
         out = []
+        names = self.model.coordinate_joints
         for lp, res in zip(self.model.loops, residuals):
-            joints = [self.joints[j] for j in sorted(set(kin.loop_columns(lp)))]
+            joints = list(dict.fromkeys(names[j] for j in sorted(set(kin.loop_columns(lp)))))
             out.append((lp.name, joints + ([lp.name] if lp.joint is None else []), res))
         return out
 
@@ -443,7 +454,7 @@ class Mechanism:
         """A note for every passive joint the assembly moved far from initial_positions."""
         held = set(self.active_index)
         far, moved = [], []
-        for j, (a, b) in enumerate(zip(start, q)):
+        for j, (a, b) in enumerate(zip(start[:len(self.joints)], q)):
             if j in held:
                 continue
             limit, unit = self.far_move_limit(j)
@@ -464,8 +475,8 @@ class Mechanism:
         warnings.warn(f'{self.name}: {text}', AssemblyWarning, stacklevel=4)
 
     def _count_degrees_of_freedom(self):
-        n = len(self.joints)
-        matrix, _ = closure.closure_jacobian_matrix(self.model, self.assembled_positions)
+        n = self.n_coordinates
+        matrix, _ = closure.closure_jacobian_matrix(self.model, self.assembled_coordinates)
         singular_values = np.linalg.svd(matrix, compute_uv=False) if matrix.size else np.zeros(0)
         scale = max(1.0, singular_values[0]) if singular_values.size else 1.0
         self.closure_rank = int(np.sum(singular_values > RANK_TOLERANCE * scale))
@@ -510,7 +521,7 @@ class Mechanism:
         of its free columns is the Frobenius one the solver uses (lane_linalg), from their
         singular values: ||A_f||_F ||A_f^+||_F."""
         best, best_cond = None, math.inf
-        n = len(self.joints)
+        n = self.n_coordinates
         combos = itertools.combinations(range(len(self.active_index)), self.dof)
         for combo in itertools.islice(combos, 5000):
             fixed = {self.active_index[i] for i in combo}

@@ -200,7 +200,7 @@ class SampleSolver:
 
     def basis(self, record):
         """The velocity basis V (list over joints) from a record's rows of the free joints."""
-        rows = [None] * len(self.mechanism.joints)
+        rows = [None] * self.mechanism.n_coordinates
         for j, row in self.unit_rows:
             rows[j] = row
         for j, row in zip(self.free, record.basis):

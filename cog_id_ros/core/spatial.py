@@ -153,7 +153,58 @@ def rotation_cosine(ra, rb):
     return (sum(ra[i] * rb[i] for i in range(9)) - 1.0) * 0.5
 
 
+def quaternion_rotation(quaternion, ops):
+    """R(q) = R_h(q) / |q|^2 for a quaternion q = (w, x, y, z) of any nonzero length (a
+    rotation whatever the length), and the columns of 2 G(q) / |q|^2: the angular velocity
+    (in the frame R maps from) per unit rate of each component, G(q) = [-v, w I + [v]x].
+    G(a) a = 0 for every a: the quaternion's own direction does not rotate."""
+    w, x, y, z = quaternion
+    ww, xx, yy, zz = w * w, x * x, y * y, z * z
+    s = ops.recip(ww + xx + yy + zz)
+    xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
+    t = 2.0 * s
+    rotation = ((ww + xx - yy - zz) * s, (xy - wz) * t, (xz + wy) * t,
+                (xy + wz) * t, (ww - xx + yy - zz) * s, (yz - wx) * t,
+                (xz - wy) * t, (yz + wx) * t, (ww - xx - yy + zz) * s)
+    rates = ((-x * t, -y * t, -z * t), (w * t, z * t, -y * t),
+             (-z * t, w * t, x * t), (y * t, -x * t, w * t))
+    return rotation, rates
+
+
 # --- constant frames (plain floats, built once at load time) -----------------------------
+
+def compose(a, b):
+    """The transform a b of two (rotation, translation) pairs."""
+    (ra, ta), (rb, tb) = a, b
+    return mat_mat(ra, rb), add(ta, mat_vec(ra, tb))
+
+
+def rotation_quaternion(r):
+    """The unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd: from its
+    largest diagonal combination, so no division by a small number)."""
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = r
+    trace = r0 + r4 + r8
+    k = max(range(4), key=lambda i: (trace, r0, r4, r8)[i])
+    if k == 0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = (0.25 * s, (r7 - r5) / s, (r2 - r6) / s, (r3 - r1) / s)
+    elif k == 1:
+        s = 2.0 * math.sqrt(1.0 + r0 - r4 - r8)
+        q = ((r7 - r5) / s, 0.25 * s, (r1 + r3) / s, (r2 + r6) / s)
+    elif k == 2:
+        s = 2.0 * math.sqrt(1.0 - r0 + r4 - r8)
+        q = ((r2 - r6) / s, (r1 + r3) / s, 0.25 * s, (r5 + r7) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 - r0 - r4 + r8)
+        q = ((r3 - r1) / s, (r2 + r6) / s, (r5 + r7) / s, 0.25 * s)
+    return q if q[0] >= 0.0 else tuple(-x for x in q)
+
+
+def inverse_transform(r, t):
+    """(R^T, -R^T t): the inverse of the transform (R, t)."""
+    rt = transpose(r)
+    return rt, scale(mat_vec(rt, t), -1.0)
+
 
 def rpy_matrix(rpy):
     """URDF roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""

@@ -85,17 +85,26 @@ def test_parallel_robots_with_spherical_joints_match_the_helper_link_ones(twin):
     _, q, qd, qdd = sample(original, 100)
     helper = cog_id_ros.Mechanism.from_params_file(config_path(original))
     native = cog_id_ros.Mechanism.from_params_file(config_path(twin))
-    assert len(native.closure_joints) == 5 and native.dof == helper.dof
-    assert len(native.joints) == len(helper.joints) - 15
+    # no helper link left: every U and S is one joint, the actuators the only coordinates
+    assert native.joints == native.active_joints and native.dof == helper.dof
+    assert len(native.closure_joints) == 12 and len(native.links) == len(helper.links) - 18
+    kinds = native.coordinate_types[len(native.joints):]
+    assert kinds.count('quaternion') == 4 and kinds.count('revolute') == 12
     expected = cog_id_ros.InverseDynamics(helper, backend='python').torques(q, qd, qdd)
     for backend in BACKENDS:
         got = cog_id_ros.InverseDynamics(native, backend=backend).torques(q, qd, qdd)
         assert np.abs(got - expected).max() < 1e-12 * np.abs(expected).max(), backend
-    # and so do the positions of the joints both have
+    # sample by sample too (warm-started Newton stops at the closure tolerance)
+    solver = cog_id_ros.InverseDynamics(native)
+    got = np.array([solver.torques(q[i], qd[i], qdd[i]) for i in range(len(q))])
+    assert np.abs(got - expected).max() < 1e-8 * np.abs(expected).max()
+    # and so do the positions of the joints both have (the actuators), from every entry
     a = cog_id_ros.InverseDynamics(helper).solve_positions(q)[:, [helper.joints.index(j)
                                                                   for j in native.joints]]
     b = cog_id_ros.InverseDynamics(native).solve_positions(q)
-    assert np.abs(a - b).max() < 1e-9
+    assert b.shape == (len(q), len(native.joints)) and np.abs(a - b).max() < 1e-9
+    assert np.abs(solver.evaluate(q).positions - a).max() < 1e-9
+    assert solver.last_pose(qd[-1].tolist())[0] == solver.solve_positions(q[-1]).tolist()
 
 
 def test_a_fixed_joint_welds_two_links():
@@ -162,15 +171,158 @@ def test_errors_of_joints_without_coordinate_name_the_parameter(change, paramete
     assert info.value.parameter == parameter and words in str(info.value), str(info.value)
 
 
-def test_a_link_held_only_by_joints_without_coordinate_is_refused_with_the_reason():
-    p = rsur_spherical()
-    p = without(p, links=['uni_cross'], joints=['uni_a', 'uni_b'])
+def rsur_both():
+    """spatial_rsur with both its S and its U as one joint each: the coupler is reached
+    through neither a revolute nor a prismatic joint, so one of them (the universal joint,
+    fewer hidden coordinates) enters the spanning tree and the other closes the loop."""
+    p = without(rsur_spherical(), links=['uni_cross'], joints=['uni_a', 'uni_b'])
     joint(p, 'uni', 'universal', 'coupler', 'rocker', parent_xyz=[0.33, 0.0, 0.0],
           child_xyz=[0.12, 0.0, 0.0], axis=[0.0, 0.0, 1.0], axis2=[0.0, -1.0, 0.0])
-    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
-        cog_id_ros.Mechanism.from_parameters(p)
-    text = str(info.value)
-    assert "link 'coupler'" in text and 'sph, uni' in text and 'only close loops' in text
+    return p
+
+
+def wrist(helper_links):
+    """A 3-UPS/S spherical wrist: a plate on a central ball joint above the base, turned by
+    three UPS legs. The plate is reached only through spherical joints, so one (the
+    central ball, listed first) enters the spanning tree as a quaternion. ``helper_links``:
+    the same mechanism with the central ball as three revolute joints through two massless
+    links (about x, y, z; 0 at home)."""
+    p = {'mechanism.name': 'wrist', 'mechanism.gravity': [0.0, 0.0, -9.81],
+         'mechanism.joints': [],
+         'links.plate.mass': 2.0, 'links.plate.com': [0.01, 0.0, 0.05],
+         'links.plate.inertia': [0.02, 0.025, 0.04, 0.001, 0.0, 0.002]}
+    links = ['plate']
+    if helper_links:
+        links += ['ball_a', 'ball_b']
+        for name in ('ball_a', 'ball_b'):
+            p[f'links.{name}.mass'] = 0.0
+        for name, parent, child, axis in (('ball_x', 'ground', 'ball_a', [1.0, 0.0, 0.0]),
+                                          ('ball_y', 'ball_a', 'ball_b', [0.0, 1.0, 0.0]),
+                                          ('ball_z', 'ball_b', 'plate', [0.0, 0.0, 1.0])):
+            joint(p, name, 'revolute', parent, child, axis=axis,
+                  **({'parent_xyz': [0.0, 0.0, 0.3]} if parent == 'ground' else {}))
+    else:
+        joint(p, 'ball', 'spherical', 'ground', 'plate', parent_xyz=[0.0, 0.0, 0.3])
+    for i in range(3):
+        a = 2.0 * np.pi * i / 3.0
+        base = [0.25 * np.cos(a), 0.25 * np.sin(a), 0.0]
+        top = [0.15 * np.cos(a + 0.6), 0.15 * np.sin(a + 0.6), 0.0]
+        d = np.array([top[0], top[1], 0.3]) - base
+        pitch, yaw = np.arccos(d[2] / np.linalg.norm(d)), np.arctan2(d[1], d[0])
+        links += [f'lower{i}', f'upper{i}']
+        p[f'links.lower{i}.mass'] = 1.0
+        p[f'links.lower{i}.com'] = [0.0, 0.0, 0.1]
+        p[f'links.lower{i}.inertia'] = [0.004, 0.004, 0.0005, 0.0, 0.0, 0.0]
+        p[f'links.upper{i}.mass'] = 0.5
+        p[f'links.upper{i}.com'] = [0.0, 0.0, -0.1]
+        p[f'links.upper{i}.inertia'] = [0.002, 0.002, 0.0002, 0.0, 0.0, 0.0]
+        joint(p, f'u{i}', 'universal', 'ground', f'lower{i}', parent_xyz=base,
+              parent_rpy=[0.0, float(pitch), float(yaw)], axis=[1.0, 0.0, 0.0],
+              axis2=[0.0, 1.0, 0.0])
+        joint(p, f'p{i}', 'prismatic', f'lower{i}', f'upper{i}', parent_xyz=[0.0, 0.0, 0.2],
+              child_xyz=[0.0, 0.0, -0.2])
+        joint(p, f's{i}', 'spherical', f'upper{i}', 'plate', child_xyz=top)
+    p['mechanism.links'] = links
+    p['mechanism.active_joints'] = ['p0', 'p1', 'p2']
+    length = float(np.linalg.norm(d))
+    p['mechanism.initial_positions'] = ([0.0] * 3 if helper_links else []) + [length - 0.4] * 3
+    return p
+
+
+def test_a_link_reached_only_through_joints_without_coordinate_enters_the_tree_by_one():
+    """Universal and spherical joints may stand anywhere: where no revolute or prismatic
+    joint reaches a link, one of them joins the spanning tree with hidden coordinates (two
+    angles, or a quaternion) that no output shows, and gives the torques of its helper-link
+    twin."""
+    _, q, qd, qdd = sample('spatial_rsur.yaml', 120)
+    expected = torques(rsur(), 'python', q, qd, qdd)
+    mech = cog_id_ros.Mechanism.from_parameters(rsur_both())
+    assert mech.closure_joints == ['sph', 'uni'] and len(mech.model.loops) == 1
+    assert mech.coordinate_types[len(mech.joints):] == ['revolute', 'revolute']
+    for backend in BACKENDS:
+        got = torques(rsur_both(), backend, q, qd, qdd)
+        assert np.abs(got - expected).max() < 1e-12 * np.abs(expected).max(), backend
+
+
+def wrist_motion(n=150):
+    """The legs' lengths for the plate turning about all three axes (by inverse kinematics
+    of the helper-link twin's own solver, finite differences for the rates)."""
+    t = np.linspace(0.0, 1.5, n)
+    twin = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(wrist(True)))
+    # drive the twin's ball angles through a closed-form motion and read the leg lengths off
+    angles = np.stack([0.3 * np.sin(2.0 * t), 0.25 * np.sin(3.0 * t + 0.4),
+                       0.4 * np.sin(1.5 * t)], axis=1)
+    mech = twin.mechanism
+    ball = [mech.joints.index(j) for j in ('ball_x', 'ball_y', 'ball_z')]
+    legs = [mech.joints.index(f'p{i}') for i in range(3)]
+    from cog_id_ros.core import closure
+    lengths = []
+    q = list(mech.assembled_coordinates)
+    for a in angles:
+        for j, v in zip(ball, a):
+            q[j] = v
+        q, _, ok = closure.assemble(mech.model, q, 1e-13, fixed=ball)
+        assert ok
+        lengths.append([q[j] for j in legs])
+    lengths = np.array(lengths)
+    dt = t[1] - t[0]
+    return lengths, np.gradient(lengths, dt, axis=0), \
+        np.gradient(np.gradient(lengths, dt, axis=0), dt, axis=0)
+
+
+def test_a_spherical_joint_in_the_tree_matches_three_revolutes_and_never_locks():
+    """The central ball of the wrist is a quaternion of the tree: the same torques as three
+    revolutes through massless links, by every backend, per sample and in a batch; and where
+    the helper links lock (middle angle at pi/2: a singular configuration) the ball does
+    not."""
+    q, qd, qdd = wrist_motion()
+    native = cog_id_ros.Mechanism.from_parameters(wrist(False))
+    assert native.joints == ['p0', 'p1', 'p2'] and native.closure_joints[0] == 'ball'
+    assert native.coordinate_types[3:].count('quaternion') == 4
+    helper = cog_id_ros.Mechanism.from_parameters(wrist(True))
+    expected = cog_id_ros.InverseDynamics(helper, backend='python').torques(q, qd, qdd)
+    scale = np.abs(expected).max()
+    for backend in BACKENDS:
+        solver = cog_id_ros.InverseDynamics(native, backend=backend)
+        assert np.abs(solver.torques(q, qd, qdd) - expected).max() < 1e-12 * scale, backend
+        solver.reset()
+        serial = np.array([solver.torques(q[i], qd[i], qdd[i]) for i in range(len(q))])
+        assert np.abs(serial - expected).max() < 1e-8 * scale, backend
+    # the closure residual counts the quaternion's |q|^2 - 1 too: it stays a unit one
+    evaluation = cog_id_ros.InverseDynamics(native).evaluate(q, qd, qdd)
+    assert evaluation.valid.all() and evaluation.closure_residual.max() < 1e-10
+    assert evaluation.positions.shape == (len(q), 3)
+
+
+def test_a_tree_spherical_joint_turns_through_the_helper_links_gimbal_lock():
+    """Plate pitched from 0 to 1.7 rad about y, held there by the legs: the helper-link
+    twin's middle angle passes pi/2 and it refuses the motion (singular); the native ball
+    follows the whole way, with the twin's torques wherever the twin still has them."""
+    native = cog_id_ros.Mechanism.from_parameters(wrist(False))
+    helper = cog_id_ros.Mechanism.from_parameters(wrist(True))
+    ball = [helper.joints.index(j) for j in ('ball_x', 'ball_y', 'ball_z')]
+    legs = [helper.joints.index(f'p{i}') for i in range(3)]
+    from cog_id_ros.core import closure
+    q = list(helper.assembled_coordinates)
+    pitches = np.linspace(0.0, 1.7, 171)
+    lengths = []
+    for pitch in pitches:
+        q[ball[1]] = pitch
+        q, _, ok = closure.assemble(helper.model, q, 1e-13, fixed=ball)
+        assert ok
+        lengths.append([q[j] for j in legs])
+    lengths = np.array(lengths)
+    with pytest.raises(cog_id_ros.CogIdError) as info:       # the helper links lock
+        cog_id_ros.InverseDynamics(helper).torques(lengths)
+    assert info.value.reason in ('singular', 'unreachable'), info.value
+    solver = cog_id_ros.InverseDynamics(native)
+    assert np.abs(solver.solve_positions(lengths) - lengths).max() < 1e-12
+    solver.reset()
+    got = np.array([solver.sample_torques(x.tolist()) for x in lengths])
+    assert np.isfinite(got).all()
+    before = pitches < 1.3
+    expected = cog_id_ros.InverseDynamics(helper).torques(lengths[before])
+    assert np.abs(got[before] - expected).max() < 1e-8 * np.abs(expected).max()
 
 
 def test_position_and_effort_limits_of_the_native_schema():
