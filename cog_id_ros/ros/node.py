@@ -467,7 +467,8 @@ class CogIdNode(Node):
             tau = np.array(efforts)
             if self.clip(tau):
                 efforts = tau.tolist()
-        # first the command: what control waits for (the compute time ends with it)
+        # first the command: what control waits for (the compute time ends with it),
+        # published serialized (conversions.EffortMessages.command_for, cdr.py)
         self.command_pub.publish(self.outputs.command_for(efforts))
         self.compute_times.append(time.perf_counter() - start)
         self.effort_pub.publish(self.outputs.state_for(msg.header, received, v_used, efforts))
@@ -663,7 +664,7 @@ class CogIdNode(Node):
         if self.timeout_behavior == 'none':
             what = 'nothing published'
         elif self.timeout_behavior == 'zero':
-            self.command_pub.publish(Float64MultiArray(data=[0.0] * n_act))
+            self.command_pub.publish(self.outputs.command_for([0.0] * n_act))
             what = 'zero efforts published'
         else:
             try:
@@ -672,7 +673,7 @@ class CogIdNode(Node):
                 self.get_logger().error(f'cannot compute holding efforts: {exc}')
                 return
             self.clip(tau)
-            self.command_pub.publish(Float64MultiArray(data=tau.tolist()))
+            self.command_pub.publish(self.outputs.command_for(tau.tolist()))
             what = 'gravity-holding efforts of the last pose published'
         self.get_logger().info(
             f'no setpoint for {self.setpoint_timeout:g} s: stream stopped, {what}')
