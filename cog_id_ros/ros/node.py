@@ -200,6 +200,12 @@ class CogIdNode(Node):
             {'effort_limits': list(mechanism_limits) if mechanism_limits else None})
         self._check_qos_overrides(overrides)
         self._make_use_sim_time_read_only()
+        # The node's time in integer ns, read per setpoint (stamp checks): without
+        # use_sim_time (read-only, so fixed from here on) the node's clock is the system
+        # clock, which time.time_ns reads too (CLOCK_REALTIME, like rcl's system time) in
+        # 0.1 us instead of the 4.7 us of get_clock().now() (measured on the reference VM)
+        self._now_ns = self._ros_now_ns if self.get_parameter('use_sim_time').value \
+            else time.time_ns
         self.effort_limits = cfg['effort_limits']
         self.setpoint_timeout = cfg['setpoint_timeout']
         self.timeout_behavior = cfg['timeout_behavior']
@@ -435,9 +441,9 @@ class CogIdNode(Node):
             received, v = setpoint_arrays(msg, self.selector)
             stamp = stamp_to_ns(msg.header.stamp)
             if not stamp:
-                stamp = self.get_clock().now().nanoseconds
+                stamp = self._now_ns()
             elif self.max_stamp_lead_ns != math.inf and 0 < (
-                    now := self.get_clock().now().nanoseconds) < stamp - self.max_stamp_lead_ns:
+                    now := self._now_ns()) < stamp - self.max_stamp_lead_ns:
                 # (a clock at 0 has not started: use_sim_time before the first /clock)
                 raise Rejected('stamp', f'stamp {stamp / NANOSECONDS:.9f} is '
                                f"{(stamp - now) / NANOSECONDS:.6g} s ahead of the node's clock "
@@ -491,6 +497,10 @@ class CogIdNode(Node):
                     self.warn_throttled('internal.joint_states', 'joint_states failed (the '
                                         f'node goes on): {type(exc).__name__}: {exc}',
                                         error=True)
+
+    def _ros_now_ns(self):
+        """The node's clock (ROS time: /clock with use_sim_time) in integer ns."""
+        return self.get_clock().now().nanoseconds
 
     def publish_joint_states(self, frame_id, stamp, rates):
         """joint_states: the closed pose the solver served the setpoint at (every joint) and
