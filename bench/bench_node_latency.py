@@ -33,10 +33,10 @@ block answers its k-th setpoint when every setpoint was answered (reliable and o
 every setpoint here is valid). A block that lost commands counts the loss and gives no
 latencies. Messages lost = setpoints sent - commands received after a drain of 0.3 s per
 block. The first ``WARM_UP`` answers of each block are left out of the percentiles (a
-block starts a new stream: the node's estimator restarts). After each rate, cog_id_node's
-own compute time per setpoint (receipt to publication, from its /diagnostics) is reported
-too, which separates the node's work from transport and executor. Not a test: it prints
-a table (and ``--json`` writes the rows).
+block starts a new stream: the node's estimator restarts). After each rate, the own
+compute time per setpoint of each cog_id_node (the ``--compare`` one too; receipt to
+publication, from its /diagnostics) is reported too, which separates the node's work from
+transport and executor. Not a test: it prints a table (and ``--json`` writes the rows).
 """
 import argparse
 import json
@@ -129,7 +129,7 @@ class Driver:
                                    self._on_command, reader) for ns in namespaces]
         self.recv = None            # arrival times by sequence number (echo nodes)
         self.commands = []          # arrival times in order (cog_id_node)
-        self.diagnostics = {}       # key -> value of cog_id_node's latest DiagnosticStatus
+        self.diagnostics = {}       # namespace -> {key: value} of its latest DiagnosticStatus
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
@@ -158,16 +158,24 @@ class Driver:
 
     def _on_diagnostics(self, msg):
         for status in msg.status:
-            if status.name.startswith('/cog/'):
-                self.diagnostics = {kv.key: kv.value for kv in status.values}
+            ns = '/' + status.name.split('/')[1] if status.name.count('/') > 1 else None
+            if ns is not None:
+                self.diagnostics[ns] = {kv.key: kv.value for kv in status.values}
 
-    def node_compute_time(self):
-        """cog_id_node's own median and max compute time per setpoint (its /diagnostics,
-        over its last 1000 setpoints), from a report made after the run."""
+    def node_compute_times(self, namespaces):
+        """{namespace: (median, max)}: each cog_id_node's own compute time per setpoint (its
+        /diagnostics, over its last 1000 setpoints), from reports made after the run."""
         self.diagnostics = {}
+        end = time.perf_counter() + 3.0
         time.sleep(1.2)
-        get = self.diagnostics.get
-        return float(get('compute_time_median_us') or 'nan'), float(get('compute_time_max_us') or 'nan')
+        while time.perf_counter() < end and not all(ns in self.diagnostics for ns in namespaces):
+            time.sleep(0.1)
+        out = {}
+        for ns in namespaces:
+            get = self.diagnostics.get(ns, {}).get
+            out[ns] = (float(get('compute_time_median_us') or 'nan'),
+                       float(get('compute_time_max_us') or 'nan'))
+        return out
 
     def wait_for(self, ns, timeout=30.0):
         end = time.perf_counter() + timeout
@@ -333,8 +341,10 @@ def main(argv=None):
             driver.wait_for(ns)
         for rate in args.rates:
             rows, medians = measure(driver, peers, rate, args.duration, args.block)
-            cog = rows['cog_id_node']
-            cog['node_compute_p50_us'], cog['node_compute_max_us'] = driver.node_compute_time()
+            nodes = [(ns, label) for ns, label in peers if ns not in ECHOES]
+            times = driver.node_compute_times([ns for ns, _ in nodes])
+            for ns, label in nodes:
+                rows[label]['node_compute_p50_us'], rows[label]['node_compute_max_us'] = times[ns]
             for row in rows.values():
                 results.append(row)
                 print(f'{row["node"]:22s} {rate:6.0f} Hz: sent {row["sent"]:6d} lost '
@@ -371,8 +381,8 @@ def main(argv=None):
               f"{s['rounds']} rounds (range {s['min_diff_us']:+.0f} .. {s['max_diff_us']:+.0f}); "
               f"pooled medians {s['pooled_diff_us']:+.0f} us; lost {s['lost']} (target 0)")
     for r in results:
-        if r['node'] == 'cog_id_node':
-            print(f"  {r['rate_hz']:.0f} Hz cog_id_node's own compute time per setpoint "
+        if 'node_compute_p50_us' in r:
+            print(f"  {r['rate_hz']:.0f} Hz {r['node']}'s own compute time per setpoint "
                   f"(diagnostics, last 1000): median {r['node_compute_p50_us']:.0f} us, "
                   f"max {r['node_compute_max_us']:.0f} us")
     if args.json:

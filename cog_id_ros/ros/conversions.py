@@ -9,10 +9,10 @@ import struct
 
 import numpy as np
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..offline import derivatives
+from . import cdr
 
 NANOSECONDS = 1_000_000_000
 
@@ -310,22 +310,23 @@ def effort_trajectory(msg, active_joints, q, qd, qdd, tau):
 
 
 class EffortMessages:
-    """Reusable output messages of the setpoint path (filled in place, then published).
+    """Output messages of the setpoint path: ``effort_command`` serialized (bytes, for
+    ``publish``: see :mod:`.cdr`), the JointStates reused (filled in place, then published).
 
     ``joints``: every joint of the mechanism, the names of ``joint_states``.
     """
 
     def __init__(self, active_joints, joints=()):
-        self.command = Float64MultiArray()
+        self._pack_command = cdr.float64_multiarray_packer(len(active_joints))
         self.state = JointState()
         self.state.name = list(active_joints)
         self.pose = JointState()
         self.pose.name = list(joints)
 
     def command_for(self, efforts):
-        """effort_command for one setpoint (a list of floats)."""
-        self.command.data = efforts
-        return self.command
+        """effort_command for one setpoint (one float per active joint), serialized: a
+        Float64MultiArray for subscribers, without rclpy's conversion of a Python message."""
+        return self._pack_command(*efforts)
 
     def state_for(self, header, positions, velocities, efforts):
         """joint_effort for one setpoint (lists of floats)."""

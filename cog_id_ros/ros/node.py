@@ -200,6 +200,12 @@ class CogIdNode(Node):
             {'effort_limits': list(mechanism_limits) if mechanism_limits else None})
         self._check_qos_overrides(overrides)
         self._make_use_sim_time_read_only()
+        # The node's time in integer ns, read per setpoint (stamp checks): without
+        # use_sim_time (read-only, so fixed from here on) the node's clock is the system
+        # clock, which time.time_ns reads too (CLOCK_REALTIME, like rcl's system time) in
+        # 0.1 us instead of the 4.7 us of get_clock().now() (measured on the reference VM)
+        self._now_ns = self._ros_now_ns if self.get_parameter('use_sim_time').value \
+            else time.time_ns
         self.effort_limits = cfg['effort_limits']
         self.setpoint_timeout = cfg['setpoint_timeout']
         self.timeout_behavior = cfg['timeout_behavior']
@@ -435,9 +441,9 @@ class CogIdNode(Node):
             received, v = setpoint_arrays(msg, self.selector)
             stamp = stamp_to_ns(msg.header.stamp)
             if not stamp:
-                stamp = self.get_clock().now().nanoseconds
+                stamp = self._now_ns()
             elif self.max_stamp_lead_ns != math.inf and 0 < (
-                    now := self.get_clock().now().nanoseconds) < stamp - self.max_stamp_lead_ns:
+                    now := self._now_ns()) < stamp - self.max_stamp_lead_ns:
                 # (a clock at 0 has not started: use_sim_time before the first /clock)
                 raise Rejected('stamp', f'stamp {stamp / NANOSECONDS:.9f} is '
                                f"{(stamp - now) / NANOSECONDS:.6g} s ahead of the node's clock "
@@ -467,7 +473,8 @@ class CogIdNode(Node):
             tau = np.array(efforts)
             if self.clip(tau):
                 efforts = tau.tolist()
-        # first the command: what control waits for (the compute time ends with it)
+        # first the command: what control waits for (the compute time ends with it),
+        # published serialized (conversions.EffortMessages.command_for, cdr.py)
         self.command_pub.publish(self.outputs.command_for(efforts))
         self.compute_times.append(time.perf_counter() - start)
         self.effort_pub.publish(self.outputs.state_for(msg.header, received, v_used, efforts))
@@ -490,6 +497,10 @@ class CogIdNode(Node):
                     self.warn_throttled('internal.joint_states', 'joint_states failed (the '
                                         f'node goes on): {type(exc).__name__}: {exc}',
                                         error=True)
+
+    def _ros_now_ns(self):
+        """The node's clock (ROS time: /clock with use_sim_time) in integer ns."""
+        return self.get_clock().now().nanoseconds
 
     def publish_joint_states(self, frame_id, stamp, rates):
         """joint_states: the closed pose the solver served the setpoint at (every joint) and
@@ -663,7 +674,7 @@ class CogIdNode(Node):
         if self.timeout_behavior == 'none':
             what = 'nothing published'
         elif self.timeout_behavior == 'zero':
-            self.command_pub.publish(Float64MultiArray(data=[0.0] * n_act))
+            self.command_pub.publish(self.outputs.command_for([0.0] * n_act))
             what = 'zero efforts published'
         else:
             try:
@@ -672,7 +683,7 @@ class CogIdNode(Node):
                 self.get_logger().error(f'cannot compute holding efforts: {exc}')
                 return
             self.clip(tau)
-            self.command_pub.publish(Float64MultiArray(data=tau.tolist()))
+            self.command_pub.publish(self.outputs.command_for(tau.tolist()))
             what = 'gravity-holding efforts of the last pose published'
         self.get_logger().info(
             f'no setpoint for {self.setpoint_timeout:g} s: stream stopped, {what}')

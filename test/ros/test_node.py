@@ -8,6 +8,7 @@ here asserts on timing: waits are generous upper bounds.
 """
 import collections
 import math
+import struct
 import threading
 import time
 
@@ -291,6 +292,26 @@ def test_joints_by_name_in_any_order_with_extra_names(nodes, mechanisms):
     assert list(msg.name) == ['joint1', 'joint3']
     np.testing.assert_allclose(msg.effort, resting_torque(mechanisms['b'], q, v), atol=1e-9)
     np.testing.assert_allclose(msg.velocity, v)
+
+
+def test_typed_subscriber_receives_exactly_the_efforts(nodes, mechanisms):
+    """effort_command goes out serialized (cog_id_ros/ros/cdr.py): an ordinary typed
+    Float64MultiArray subscription receives the efforts in active_joints order, bit for bit
+    those of joint_effort (built from the same floats), with an empty layout."""
+    _, probes = nodes
+    probe = probes['b']
+    n = len(probe.commands)
+    stamp = fresh_stamp()
+    q, v = [1.1, 1.1], [-0.3, -0.3]
+    probe.send(stamp, ['joint3', 'joint1'], [q[1], q[0]], [v[1], v[0]])
+    state = probe.wait_effort(stamp)
+    assert wait_until(lambda: len(probe.commands) > n)
+    command = probe.commands[n]
+    assert isinstance(command, Float64MultiArray)
+    assert list(command.layout.dim) == [] and command.layout.data_offset == 0
+    assert len(command.data) == 2 and list(state.name) == ['joint1', 'joint3']
+    assert struct.pack('<2d', *command.data) == struct.pack('<2d', *state.effort)
+    np.testing.assert_allclose(command.data, resting_torque(mechanisms['b'], q, v), atol=1e-9)
 
 
 def test_zero_stamps_use_the_receipt_time(nodes, mechanisms):
