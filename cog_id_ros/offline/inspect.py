@@ -2,12 +2,13 @@
 
     cog_id_inspect --params-file config/X.yaml [--plot pose.png] [--trajectory motion.csv]
 
-Prints the spanning tree the solver built (base link first), the loops and the joints
-that close them, the degrees of freedom and the actuators, every joint's given
-``initial_positions`` beside the position the assembly at load reached (a WARNING where an
-actuator moved, or a passive joint moved further than the loader's "far" threshold: the
-assembly probably took another branch than the one meant), and the closure residual and
-condition number at that pose. ``--plot`` draws the mechanism there
+Prints the spanning tree the solver built (base link first; a spherical, universal or
+fixed joint in it as one hop, by its declared name), the loops and the joints that close
+them, the degrees of freedom (hidden coordinates counted) and the actuators, every joint's
+given ``initial_positions`` beside the position the assembly at load reached (a WARNING
+where an actuator moved, or a passive joint moved further than the loader's "far"
+threshold: the assembly probably took another branch than the one meant), and the closure
+residual and condition number at that pose. ``--plot`` draws the mechanism there
 (:mod:`cog_id_ros.offline.mechanism_plot`), ``--trajectory`` adds snapshots along a motion
 in the input format of ``cog_id_torques``. Pure reporting: nothing is changed or written
 but the picture. No ROS import. docs/inspect.md has an example.
@@ -21,6 +22,7 @@ import warnings
 
 import numpy as np
 
+from ..core.errors import CogIdError
 from . import cli, trajectory_io
 from .cli import Interrupted, StopSignals, ToolError
 from .trajectory_io import TrajectoryError
@@ -49,13 +51,14 @@ TINY = 1e-12
 EPILOG = f"""\
 what it prints:
   the spanning tree (each link under its tree parent, with the joint between them;
-  active joints marked), the loops (the joint that closes each, and its cycle through
-  the tree), degrees of freedom and actuators (primary or redundant, torque weights),
-  a table of every joint: initial_positions (given) beside the pose the loader assembled
-  and the difference, WARNING lines where an actuator moved or a passive joint moved more
-  than the loader's threshold (the assembly probably took another branch: set
-  initial_positions near the pose you mean), then the closure residual and the closure
-  Jacobian condition number at the assembled pose.
+  active joints marked; a spherical, universal or fixed joint where the tree needs one),
+  the loops (the joint that closes each, and its cycle through the tree), degrees of
+  freedom and actuators (primary or redundant, torque weights), a table of every joint:
+  initial_positions (given) beside the pose the loader assembled and the difference,
+  WARNING lines where an actuator moved or a passive joint moved more than the loader's
+  threshold (the assembly probably took another branch: set initial_positions near the
+  pose you mean), then the closure residual and the closure Jacobian condition number at
+  the assembled pose.
 
 exit status:
   {EXIT_OK}  success (also with warnings)
@@ -144,7 +147,10 @@ def run(args, stdout, stderr):
         motion = solve_trajectory(mech, solver, args.trajectory, args.snapshots, stderr)
         text += '\n\n' + '\n'.join(format_motion(motion))
     if args.plot:
-        _draw(args, mech, evaluation.positions[0], motion, plot_format)
+        # every solver coordinate: the hidden ones of the tree's spherical and universal
+        # joints place the links they reach (evaluation.positions has the joints' only)
+        _draw(args, mech, getattr(mech, 'assembled_coordinates', mech.assembled_positions),
+              motion, plot_format)
         text += f'\n\nwrote {args.plot}'
     if stdout is None:
         raise BrokenPipeError('stdout is closed')
@@ -204,7 +210,9 @@ def _check_plot_path(args):
 
 def _draw(args, mech, positions, motion, fmt):
     from . import mechanism_plot
-    snapshots = motion.snapshots if motion is not None else ()
+    snapshots = [] if motion is None else [
+        (t, mechanism_plot.frames_from_cog_poses(mech, *links))
+        for (t, _), links in zip(motion.snapshots, motion.snapshot_links)]
     try:
         with trajectory_io.atomic_output(args.plot) as tmp:
             mechanism_plot.draw_mechanism(
@@ -236,10 +244,17 @@ def _link_name(mech, link):
 
 
 def _joint_kinds(mech):
-    """{joint name: type} of every joint, those with a coordinate and the closure-only ones."""
+    """{joint name: type} of every joint: those with a coordinate, then the spherical,
+    universal and fixed ones."""
     kinds = dict(zip(mech.joints, mech.joint_types))
     kinds.update((spec.name, spec.kind) for spec in getattr(mech, 'closure_specs', ()))
     return kinds
+
+
+def _declared(mech):
+    """{joint name: (parent link, child link)} as written in the parameter file."""
+    specs = list(mech.joint_specs) + list(getattr(mech, 'closure_specs', ()))
+    return {spec.name: (spec.parent, spec.child) for spec in specs}
 
 
 def format_report(mech, evaluation, params_file):
@@ -263,6 +278,49 @@ def format_header(mech, params_file):
             f"[{', '.join(f'{g:g}' for g in mech.gravity)}] m/s^2"]
 
 
+#: what a spherical, universal or fixed joint in the spanning tree adds to the coordinates
+HIDDEN = {'universal': 'hidden coordinates: 2 angles',
+          'spherical': 'hidden coordinates: a quaternion',
+          'fixed': 'no coordinate'}
+
+
+def tree_hops(mech):
+    """The spanning tree by declared joints: {link: (tree parent link, joint name)} for
+    every moving link (BASE for the base link as parent).
+
+    The solver's tree may hold links of its own (the massless cross of a universal joint in
+    the tree, ``<joint>.cross``, two revolute edges of that joint's name): a hop passes
+    through them, from the real link above to the real link below, as one joint."""
+    model = mech.model
+    n_real = len(mech.links)
+    hops = {}
+    for edge in model.edges:
+        if edge.child >= n_real:                 # into a virtual link: its hop ends below
+            continue
+        parent = edge.parent
+        while parent >= n_real:                  # up through virtual links
+            parent = model.edges[model.edge_of_link[parent]].parent
+        hops[edge.child] = (parent, edge.name or mech.joints[edge.joint])
+    return hops
+
+
+def tree_children(mech, hops=None):
+    """{link: [(child link, joint name)]} in the solver's (breadth-first) order."""
+    hops = tree_hops(mech) if hops is None else hops
+    children = {}
+    for edge in mech.model.edges:
+        if edge.child in hops:
+            parent, name = hops[edge.child]
+            children.setdefault(parent, []).append((edge.child, name))
+    return children
+
+
+def closure_joints_in_tree(mech):
+    """The spherical, universal and fixed joints the solver put in the spanning tree."""
+    closure = set(getattr(mech, 'closure_joints', ()))
+    return {name for _, name in tree_hops(mech).values() if name in closure}
+
+
 def format_structure(mech):
     """The spanning tree (base first; every link under its tree parent, with the joint
     between them) and the loops (closing joint, and the cycle of tree joints), as lines.
@@ -271,34 +329,31 @@ def format_structure(mech):
     from ..core.kinematics import BASE
     model = mech.model
     kinds = _joint_kinds(mech)
+    declared = _declared(mech)
     active = set(mech.active_joints)
-    children = {}
-    edge_of_joint = {}
-    for edge in model.edges:
-        children.setdefault(edge.parent, []).append(edge)
-        edge_of_joint[edge.joint] = edge
+    hops = tree_hops(mech)
+    children = tree_children(mech, hops)
 
-    def joint_label(name, parent, child, declared):
+    def joint_label(name, parent, child):
         marks = [kinds[name]]
         if name in active:
             marks.append('ACTIVE')
-        if declared != (parent, child):
-            marks.append(f'written {_link_name(mech, declared[0])} -> '
-                         f'{_link_name(mech, declared[1])}')
+        written = declared[name]
+        if written != (parent, child):
+            marks.append(f'written {_link_name(mech, written[0])} -> '
+                         f'{_link_name(mech, written[1])}')
         return f"{name} ({', '.join(marks)})"
 
     lines = ['spanning tree (each link under its tree parent, by the joint between them):',
              f'  {mech.base_link} (base link)']
 
     def walk(link, prefix):
-        edges = children.get(link, [])
-        for k, edge in enumerate(edges):
-            last = k == len(edges) - 1
-            spec = mech.joint_specs[edge.joint]
-            label = joint_label(spec.name, edge.parent, edge.child, (spec.parent, spec.child))
+        below = children.get(link, [])
+        for k, (child, name) in enumerate(below):
+            last = k == len(below) - 1
             lines.append(f"  {prefix}{'`-- ' if last else '|-- '}"
-                         f'{_link_name(mech, edge.child)}  by {label}')
-            walk(edge.child, prefix + ('    ' if last else '|   '))
+                         f'{_link_name(mech, child)}  by {joint_label(name, link, child)}')
+            walk(child, prefix + ('    ' if last else '|   '))
 
     walk(BASE, '')
     loops = model.loops
@@ -309,39 +364,57 @@ def format_structure(mech):
         lines.append('  none: an open chain')
     for number, loop in enumerate(loops, start=1):
         name = loop.name or mech.joints[loop.joint]
-        label = joint_label(name, loop.parent, loop.child, (loop.parent, loop.child))
+        label = joint_label(name, loop.parent, loop.child)
         lines.append(f'  {number}. closed by {label}, between '
                      f'{_link_name(mech, loop.parent)} and {_link_name(mech, loop.child)}')
-        cycle = _cycle_text(mech, loop, edge_of_joint)
+        cycle = _cycle_text(mech, loop, hops)
         lines.extend(textwrap.wrap(cycle, WIDTH - 4, initial_indent=' ' * 6,
                                    subsequent_indent=' ' * 8, break_on_hyphens=False))
     return lines
 
 
-def _cycle_text(mech, loop, edge_of_joint):
+def _up_path(hops, link):
+    """[(joint, link above)] from ``link`` up to the base link."""
+    from ..core.kinematics import BASE
+    path = []
+    while link != BASE:
+        parent, name = hops[link]
+        path.append((name, parent))
+        link = parent
+    return path
+
+
+def _cycle_text(mech, loop, hops):
     """'a -j1- b -j2- c =jc= d -j3- a': from the loop's nearest common ancestor down the
-    tree to the closing joint's parent link, across it, and back up from its child."""
-    down_to_child = [mech.joints[j] for j, sign in loop.cycle if sign > 0]
-    down_to_parent = [mech.joints[j] for j, sign in loop.cycle if sign < 0]
-    child_edges = [edge_of_joint[j] for j, sign in loop.cycle if sign > 0]
-    parent_edges = [edge_of_joint[j] for j, sign in loop.cycle if sign < 0]
-    first = (parent_edges or child_edges)
-    top = first[0].parent if first else loop.parent
+    tree to the closing joint's parent link, across it, and back up from its child. Tree
+    joints by their declared names (a universal joint in the tree is one hop)."""
+    up_parent, up_child = _up_path(hops, loop.parent), _up_path(hops, loop.child)
+    above_parent = [loop.parent] + [link for _, link in up_parent]
+    above_child = [loop.child] + [link for _, link in up_child]
+    top = next(link for link in above_parent if link in above_child)
     words = [_link_name(mech, top)]
-    for name, edge in zip(down_to_parent, parent_edges):
-        words += [f'-{name}-', _link_name(mech, edge.child)]
+    for i in reversed(range(above_parent.index(top))):
+        words += [f'-{up_parent[i][0]}-', _link_name(mech, above_parent[i])]
     words += [f'={loop.name or mech.joints[loop.joint]}=', _link_name(mech, loop.child)]
-    for name, edge in reversed(list(zip(down_to_child, child_edges))):
-        words += [f'-{name}-', _link_name(mech, edge.parent)]
+    for i in range(above_child.index(top)):
+        words += [f'-{up_child[i][0]}-', _link_name(mech, above_child[i + 1])]
     return ' '.join(words)
 
 
 def format_actuation(mech):
     primary = set(mech.primary)
     n_active = len(mech.active_joints)
-    coordinates = len(mech.joints)
-    lines = [f'degrees of freedom: {mech.dof} ({coordinates} joint coordinates - closure '
-             f'rank {mech.closure_rank})']
+    coordinates = getattr(mech, 'n_coordinates', len(mech.joints))
+    hidden = coordinates - len(mech.joints)
+    if hidden:
+        lines = [f'degrees of freedom: {mech.dof} ({coordinates} coordinates - closure rank '
+                 f'{mech.closure_rank})']
+        lines += textwrap.wrap(f'coordinates: {len(mech.joints)} of the joints, {hidden} '
+                               f'hidden ({_hidden_text(mech)})', WIDTH,
+                               initial_indent='  ', subsequent_indent='    ')
+    else:
+        lines = [f'degrees of freedom: {mech.dof} ({coordinates} joint coordinates - closure '
+                 f'rank {mech.closure_rank})']
     if mech.is_redundant:
         lines.append(f'active joints: {n_active} for {mech.dof} DOF (redundant); the torques '
                      f'minimise sum(w_k tau_k^2), w = torque_weights:')
@@ -355,6 +428,23 @@ def format_actuation(mech):
         lines.append(f"active joints: {', '.join(mech.active_joints)} "
                      f"({'all primary' if n_active > 1 else 'primary'}; not redundant)")
     return lines
+
+
+def _hidden_text(mech):
+    """What the hidden coordinates are: the tree's universal and spherical joints'."""
+    kinds = _joint_kinds(mech)
+    in_tree = [name for name in closure_joints_in_tree(mech) if kinds[name] != 'fixed']
+    universal = sum(kinds[name] == 'universal' for name in in_tree)
+    spherical = sum(kinds[name] == 'spherical' for name in in_tree)
+    parts = []
+    if universal:
+        parts.append('2 angles of the universal joint in the tree' if universal == 1 else
+                     f'2 angles each of the {universal} universal joints in the tree')
+    quaternion = 'a quaternion (4 numbers; |q| = 1 is a closure equation)'
+    if spherical:
+        parts.append(f'{quaternion} of the spherical joint in the tree' if spherical == 1
+                     else f'{quaternion} each of the {spherical} spherical joints in the tree')
+    return '; '.join(parts)
 
 
 def joint_rows(mech):
@@ -389,6 +479,27 @@ def joint_rows(mech):
     return rows
 
 
+def closure_rows(mech):
+    """Table rows of the spherical, universal and fixed joints (no coordinate of their own):
+    role 'passive, closes loop k', or 'in the tree (hidden coordinates: ...)' for one the
+    solver put in the spanning tree."""
+    closing = {lp.name: k for k, lp in enumerate(mech.model.loops, start=1)
+               if lp.joint is None}
+    in_tree = closure_joints_in_tree(mech)
+    rows = []
+    for spec in getattr(mech, 'closure_specs', ()):
+        if spec.name in closing:
+            role = f'passive, closes loop {closing[spec.name]}'
+        elif spec.name in in_tree:
+            role = f'in the tree ({HIDDEN[spec.kind]})'
+        else:                # (the core puts every one in the tree or a loop)
+            role = 'passive'
+        rows.append((spec.name, spec.kind, role, '-', '-', '-',
+                     'hidden' if spec.name in in_tree and spec.kind != 'fixed'
+                     else 'no coordinate'))
+    return rows
+
+
 def format_joint_table(mech):
     rows = joint_rows(mech)
     header = ('joint', 'type', 'role', 'given', 'assembled', 'difference', 'unit')
@@ -396,10 +507,7 @@ def format_joint_table(mech):
     for name, kind, role, given, assembled, unit, warning in rows:
         table.append((name + (' !' if warning else ''), kind, role, _value(given),
                       _value(assembled), _signed(assembled - given), unit))
-    closing = {lp.name: k for k, lp in enumerate(mech.model.loops, start=1)}
-    for spec in getattr(mech, 'closure_specs', ()):
-        table.append((spec.name, spec.kind, f'passive, closes loop {closing.get(spec.name)}',
-                      '-', '-', '-', 'no coordinate'))
+    table += closure_rows(mech)
     widths = [max(len(r[i]) for r in table) for i in range(len(header))]
     lines = ['joints (given: initial_positions; assembled: where the loader closed the loops, '
              'actuators held):']
@@ -465,15 +573,19 @@ def format_closure(mech, evaluation):
 
 class Motion:
     """What solving --trajectory gave: ``snapshots`` [(time, positions (n_joints,))] to
-    draw, the rows solved, the largest closure residual and condition number, and the
-    rows the solver refused [(row, time, message)]."""
+    draw and ``snapshot_links`` beside them [(COG positions (n_links, 3), link rotations
+    (n_links, 3, 3))] (``InverseDynamics.cog_poses``: the joints' positions alone do not
+    place a link reached through a spherical or universal joint), the rows solved, the
+    largest closure residual and condition number, and the rows the solver refused
+    [(row, time, message)]."""
 
     def __init__(self, path, n_rows, time_span, snapshots, solved, residual, condition,
-                 condition_time, refused):
+                 condition_time, refused, snapshot_links=()):
         self.path = path
         self.n_rows = n_rows
         self.time_span = time_span
         self.snapshots = snapshots
+        self.snapshot_links = list(snapshot_links)
         self.solved = solved
         self.residual = residual
         self.condition = condition
@@ -501,20 +613,42 @@ def solve_trajectory(mech, solver, path, n_snapshots, stderr):
     q = np.column_stack([traj.columns[trajectory_io.joint_column(j, 'position')][rows]
                          for j in active])
     solver.reset()
-    result = solver.evaluate(q, on_invalid='skip')
-    valid = np.asarray(result.valid, bool)
-    refused = [(int(rows[k]) + 1, float(traj.time[rows[k]]), cli._one_line(result.errors[k]))
-               for k in np.flatnonzero(~valid)]
+    # in order, in pieces that end at the snapshot rows: at the end of each the solver is at
+    # the snapshot's pose, whose link poses it gives (cog_poses) without leaving the branch
     wanted = set(snapshot_rows.tolist())
-    snapshots = [(float(traj.time[r]), np.array(result.positions[k]))
-                 for k, r in enumerate(rows.tolist()) if r in wanted and valid[k]]
+    ends = [k + 1 for k, r in enumerate(rows.tolist()) if r in wanted]
+    if not ends or ends[-1] != len(rows):
+        ends.append(len(rows))
+    valid, errors, positions, residuals, conditions = [], [], [], [], []
+    snapshots, links = [], []
+    start = 0
+    for end in ends:
+        part = solver.evaluate(q[start:end], on_invalid='skip')
+        valid += np.asarray(part.valid, bool).tolist()
+        errors += list(part.errors)
+        positions += list(np.asarray(part.positions))
+        residuals += np.asarray(part.closure_residual, float).tolist()
+        conditions += np.asarray(part.condition_number, float).tolist()
+        k = end - 1
+        if int(rows[k]) in wanted and valid[k]:
+            try:
+                cogs, rotations = solver.cog_poses(q[k])
+            except CogIdError:              # (at a pose just solved: not expected)
+                pass
+            else:
+                snapshots.append((float(traj.time[rows[k]]), np.array(positions[k])))
+                links.append((np.array(cogs), np.array(rotations)))
+        start = end
+    valid = np.array(valid, bool)
+    refused = [(int(rows[k]) + 1, float(traj.time[rows[k]]), cli._one_line(errors[k]))
+               for k in np.flatnonzero(~valid)]
     residual = condition = condition_time = None
     if valid.any():
-        residual = float(np.max(result.closure_residual[valid]))
-        k = int(np.argmax(np.where(valid, result.condition_number, -np.inf)))
-        condition, condition_time = float(result.condition_number[k]), float(traj.time[rows[k]])
+        residual = float(np.max(np.array(residuals)[valid]))
+        k = int(np.argmax(np.where(valid, conditions, -np.inf)))
+        condition, condition_time = float(conditions[k]), float(traj.time[rows[k]])
     return Motion(path, n, (float(traj.time[0]), float(traj.time[-1])), snapshots,
-                  int(valid.sum()), residual, condition, condition_time, refused)
+                  int(valid.sum()), residual, condition, condition_time, refused, links)
 
 
 def format_motion(motion):

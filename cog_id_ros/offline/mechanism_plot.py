@@ -41,17 +41,47 @@ PALETTE = ('#1f77b4', '#ff7f0e', '#2ca02c', '#9467bd', '#8c564b', '#e377c2', '#7
            '#bcbd22', '#17becf')
 
 
-class Pose:
-    """World geometry of a mechanism at joint coordinates ``q`` (mechanism.joints order).
+def link_frames(mech, coordinates):
+    """The links' frames (a :class:`kinematics.Frames`) at every solver coordinate:
+    mechanism.joints, then the hidden ones of the spherical and universal joints in the
+    spanning tree (``mechanism.assembled_coordinates`` at the assembled pose). The joints'
+    positions alone do not place a link reached through such a joint."""
+    n = getattr(mech, 'n_coordinates', len(mech.joints))
+    if len(coordinates) != n:
+        raise ValueError(f'{mech.name}: expected all {n} solver coordinates (mechanism.'
+                         f'assembled_coordinates; {n - len(mech.joints)} hidden ones of '
+                         f'joints in the spanning tree), got {len(coordinates)}: for a pose '
+                         f'the solver reached, use frames_from_cog_poses')
+    return kin.forward_kinematics(mech.model, [float(x) for x in coordinates], sp.ScalarOps)
 
-    ``joints``: per joint (with a coordinate, then the closure-only ones) a dict with
-    name, kind, active, closing, parent_point, child_point, axes (world unit vectors).
-    ``links``: per moving link (name, attachment points (k, 3), cog (3,), mass).
-    ``base_points``: (k, 3) attachment points on the base link.
+
+def frames_from_cog_poses(mech, positions, rotations):
+    """The links' frames from ``InverseDynamics.cog_poses`` of one sample: COG positions
+    (n_links, 3) and link rotations (n_links, 3, 3) of the moving links; the frame origin
+    is the COG less the rotated ``link_com``."""
+    frames = kin.Frames()
+    frames.rot, frames.pos, frames.xi = [], [], []
+    for cog, rotation, com in zip(np.asarray(positions, float), np.asarray(rotations, float),
+                                  mech.link_com):
+        frames.rot.append(tuple(float(x) for x in rotation.reshape(9)))
+        frames.pos.append(tuple(float(x) for x in cog - rotation @ np.asarray(com, float)))
+    return frames
+
+
+class Pose:
+    """World geometry of a mechanism at a pose: ``where`` is every solver coordinate
+    (:func:`link_frames`; mechanism.joints order, then the hidden ones) or the links'
+    frames (a :class:`kinematics.Frames`, e.g. :func:`frames_from_cog_poses`).
+
+    ``joints``: per joint (with a coordinate, then the spherical, universal and fixed ones)
+    a dict with name, kind, active, closing, parent_point, child_point, axes (world unit
+    vectors). ``links``: per moving link (name, attachment points (k, 3), cog (3,), mass);
+    the solver's own massless links (the cross of a universal joint in the tree) are not
+    among them. ``base_points``: (k, 3) attachment points on the base link.
     """
 
-    def __init__(self, mech, q):
-        frames = kin.forward_kinematics(mech.model, [float(x) for x in q], sp.ScalarOps)
+    def __init__(self, mech, where):
+        frames = where if isinstance(where, kin.Frames) else link_frames(mech, where)
         closing = {lp.name for lp in mech.model.loops}
         active = set(mech.active_joints)
         specs = list(mech.joint_specs) + list(getattr(mech, 'closure_specs', ()))
@@ -176,11 +206,13 @@ def _ordered(points, normal=None):
 
 def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=None,
                    warning=None):
-    """Draw ``mech`` at joint coordinates ``q`` (mechanism.joints order) into ``path``.
+    """Draw ``mech`` at pose ``q`` into ``path``: every solver coordinate (mechanism.joints
+    order, then the hidden ones: ``mechanism.assembled_coordinates``) or the links' frames
+    (:class:`Pose`).
 
-    ``snapshots``: [(time, q)] drawn faded behind (earlier lighter). ``fmt``: the image
-    format (``path`` may be a temporary name). ``warning``: a line shown in red under the
-    title."""
+    ``snapshots``: [(time, q)] drawn faded behind (earlier lighter), each ``q`` as above.
+    ``fmt``: the image format (``path`` may be a temporary name). ``warning``: a line shown
+    in red under the title."""
     from matplotlib.figure import Figure
 
     pose = Pose(mech, q)
@@ -380,7 +412,7 @@ def link_colors(mech, pose):
             branch[link], roots = roots, roots + 1
         else:
             branch[link] = branch[edge.parent]
-        if not drawn[link]:
+        if link >= len(mech.links) or not drawn[link]:    # (a universal joint's cross)
             continue
         if closures.get(link, 0) >= 2:
             colors[link] = PLATFORM_COLOR
@@ -458,5 +490,6 @@ def _draw_joints(view, pose):
 
 
 def figure_kind(mech, q):
-    """'planar' or 'spatial': how :func:`draw_mechanism` draws ``mech`` at ``q``."""
+    """'planar' or 'spatial': how :func:`draw_mechanism` draws ``mech`` at ``q`` (as
+    there)."""
     return 'planar' if planar_normal(mech, Pose(mech, q)) is not None else 'spatial'

@@ -24,9 +24,14 @@ pytest.importorskip('matplotlib')
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / 'config'
-# and one with spherical joints, which have no coordinate and always close a loop
-CONFIGS = ['paper_four_bar_a', 'five_bar_redundant', 'stewart_6ups', 'spatial_rsur',
-           'delta_3rus_spherical']
+# and two with every U and S joint native: one universal and one spherical joint enter the
+# spanning tree per leg (hidden coordinates), the other spherical joints close the loops
+SPHERICAL = ['stewart_6ups_spherical', 'delta_3rus_spherical']
+CONFIGS = ['paper_four_bar_a', 'five_bar_redundant', 'stewart_6ups', 'spatial_rsur'] + SPHERICAL
+#: what the joint table says of a spherical, universal or fixed joint in the spanning tree
+IN_TREE = {'universal': 'in the tree (hidden coordinates: 2 angles)',
+           'spherical': 'in the tree (hidden coordinates: a quaternion)',
+           'fixed': 'in the tree (no coordinate)'}
 TARGET = CONFIG / 'paper_four_bar_target.csv'
 UPRIGHT = ('initial_positions: [1.5707963267948966, -1.5707963267948966, 1.5707963267948966, '
            '1.5707963267948966]')
@@ -66,16 +71,19 @@ def section(out, first_line_start):
 
 
 def parse_tree(out):
-    """{link: (tree parent, joint, type, active)} from the printed spanning tree."""
+    """{link: (tree parent, joint, type, active, written)} from the printed spanning tree
+    (written: the 'written A -> B' mark, or None)."""
     lines = section(out, 'spanning tree')[2:]
     tree, stack = {}, []
     for line in lines:
-        m = re.match(r'^  ([| `-]*?)(?:\|-- |`-- )(\w+)  by (\w+) \((\w+)(, ACTIVE)?', line)
+        m = re.match(r'^  ([| `-]*?)(?:\|-- |`-- )(\w+)  by (\w+) \((\w+)(, ACTIVE)?'
+                     r'(?:, written (\w+) -> (\w+))?\)$', line)
         assert m, line
         depth = len(m.group(1)) // 4
         del stack[depth:]
         parent = stack[-1] if stack else None
-        tree[m.group(2)] = (parent, m.group(3), m.group(4), bool(m.group(5)))
+        written = (m.group(6), m.group(7)) if m.group(6) else None
+        tree[m.group(2)] = (parent, m.group(3), m.group(4), bool(m.group(5)), written)
         stack.append(m.group(2))
     return tree
 
@@ -95,31 +103,102 @@ def parse_loops(out):
         words = cycle.split()
         assert words[1::2].count(f'={closing}=') == 1, cycle
         tree_joints = [w.strip('-') for w in words[1::2] if w.startswith('-')]
-        parsed.append((closing, tree_joints, words[0::2]))
+        parsed.append((closing, tree_joints, words))
     return parsed
+
+
+def link_name(mech, link):
+    return mech.base_link if link == BASE else mech.model.link_names[link]
+
+
+def declared_joints(mech):
+    """{joint: (type, parent link name, child link name)} as the parameter file has them."""
+    return {spec.name: (spec.kind, link_name(mech, spec.parent), link_name(mech, spec.child))
+            for spec in list(mech.joint_specs) + list(mech.closure_specs)}
+
+
+def expected_tree(mech):
+    """{link: (tree parent, declared joint)} from the solver's tree edges: a universal
+    joint in the tree is two edges through the virtual link '<joint>.cross' (not a link of
+    the mechanism), which the report shows as one hop."""
+    model, n_real = mech.model, len(mech.links)
+    assert model.n_links == len(model.link_names) >= n_real
+    tree = {}
+    for edge in model.edges:
+        if edge.child >= n_real:
+            assert model.link_names[edge.child] == f'{edge.name}.cross'
+            assert edge.kind == 'revolute' and edge.joint >= len(mech.joints)
+            continue
+        parent = edge.parent
+        if parent >= n_real:             # the second hop of a universal joint in the tree
+            assert model.link_names[parent] == f'{edge.name}.cross'
+            (up,) = [e for e in model.edges if e.child == parent]
+            assert up.name == edge.name
+            parent = up.parent
+        tree[mech.links[edge.child]] = (link_name(mech, parent), edge.name)
+    return tree
 
 
 def check_structure(out, mech):
     """The printed tree, loops and DOF are the mechanism's."""
     tree = parse_tree(out)
-    assert set(tree) == set(mech.links)
-    for edge in mech.model.edges:
-        parent, joint, kind, active = tree[mech.links[edge.child]]
-        assert parent == (None if edge.parent == BASE else mech.links[edge.parent])
-        assert joint == mech.joints[edge.joint]
-        assert kind == mech.joint_types[edge.joint]
+    assert set(tree) == set(mech.links)          # the cross of a U joint is no link
+    declared = declared_joints(mech)
+    expected = expected_tree(mech)
+    for link, (parent, joint, kind, active, written) in tree.items():
+        assert (parent or mech.base_link, joint) == expected[link], link
+        assert kind == declared[joint][0]
         assert active == (joint in mech.active_joints)
+        if written is None:
+            assert declared[joint][1:] == (parent or mech.base_link, link)
+        else:
+            assert written == declared[joint][1:] != (parent or mech.base_link, link)
+    hops = {(parent or mech.base_link, joint, link)
+            for link, (parent, joint, *_) in tree.items()}
     loops = parse_loops(out)
     assert len(loops) == len(mech.model.loops)
-    for (closing, tree_joints, links), loop in zip(loops, mech.model.loops):
+    fixed = {name for name, (kind, *_) in declared.items() if kind == 'fixed'}
+    for (closing, tree_joints, words), loop in zip(loops, mech.model.loops):
         assert closing == loop.name
-        assert sorted(tree_joints) == sorted(mech.joints[j] for j, _ in loop.cycle)
+        # every coordinate of the cycle (hidden ones too) is a declared joint's, once each;
+        # a fixed joint in the tree has none
+        names = list(dict.fromkeys(mech.model.coordinate_joints[c] for c, _ in loop.cycle))
+        assert len(tree_joints) == len(set(tree_joints))
+        assert set(tree_joints) - fixed == set(names)
+        links = words[0::2]
         assert links[0] == links[-1]          # the cycle comes back where it started
-        names = {mech.links[k] if k != BASE else mech.base_link for k in (loop.parent,
-                                                                          loop.child)}
-        assert names <= set(links)
+        for a, joint, b in zip(words[0::2], words[1::2], words[2::2]):
+            if joint == f'={closing}=':
+                assert (a, b) == declared[closing][1:]
+            else:                             # a hop of the printed tree, either way
+                joint = joint.strip('-')
+                assert (a, joint, b) in hops or (b, joint, a) in hops, (a, joint, b)
     assert f'degrees of freedom: {mech.dof} ' in out
     assert f' {mech.dof} DOF' in out
+    assert mech.dof == mech.n_coordinates - mech.closure_rank
+    if mech.n_coordinates > len(mech.joints):
+        assert (f'degrees of freedom: {mech.dof} ({mech.n_coordinates} coordinates - closure '
+                f'rank {mech.closure_rank})') in out
+        hidden = mech.n_coordinates - len(mech.joints)
+        assert f'coordinates: {len(mech.joints)} of the joints, {hidden} hidden' in out
+    else:
+        assert (f'degrees of freedom: {mech.dof} ({len(mech.joints)} joint coordinates - '
+                f'closure rank {mech.closure_rank})') in out
+
+
+def check_closure_rows(out, mech):
+    """The spherical, universal and fixed joints' rows: the loop each closes, or in the
+    tree with its hidden coordinates."""
+    closes = {lp.name: k for k, lp in enumerate(mech.model.loops, start=1)}
+    in_tree = {edge.name for edge in mech.model.edges}
+    for spec in mech.closure_specs:
+        assert (spec.name in closes) != (spec.name in in_tree), spec.name
+        role = (f'passive, closes loop {closes[spec.name]}' if spec.name in closes
+                else IN_TREE[spec.kind])
+        assert re.search(rf'^  {spec.name}\s+{spec.kind}\s+{re.escape(role)}\s+-', out,
+                         re.MULTILINE), (spec.name, role)
+    for unit in mech.model.units:             # a quaternion of a spherical joint in the tree
+        assert unit.name in in_tree and unit.name not in closes
 
 
 def joint_table(out):
@@ -166,9 +245,7 @@ def test_report_and_picture_match_the_mechanism(name, tmp_path, capsys):
         assert role.startswith('active' if name_j in mech.active_joints else 'passive')
         assert given == pytest.approx(mech.initial_positions[j], rel=1e-5, abs=1e-12)
         assert assembled == pytest.approx(mech.assembled_positions[j], rel=1e-5, abs=1e-12)
-    for spec in mech.closure_specs:
-        assert re.search(rf'^  {spec.name}\s+{spec.kind}\s+passive, closes loop \d+\s+-', out,
-                         re.MULTILINE)
+    check_closure_rows(out, mech)
     assert 'WARNING' not in out
     assert 'no joint moved far at assembly' in out
     evaluation = cog_id_ros.InverseDynamics(mech, backend='reference').evaluate(
@@ -180,6 +257,132 @@ def test_report_and_picture_match_the_mechanism(name, tmp_path, capsys):
     assert condition == pytest.approx(float(evaluation.condition_number[0]), rel=1e-3)
     assert out.rstrip().endswith(f'wrote {picture}')
     check_picture(picture)
+
+
+def closure_joint_builders():
+    """test/core/test_closure_joints.py (its parameter builders)."""
+    import importlib.util
+    path = ROOT / 'test' / 'core' / 'test_closure_joints.py'
+    spec = importlib.util.spec_from_file_location('closure_joint_builders', path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def welded_rsur(build):
+    """spatial_rsur with a second link welded to the rocker by a fixed joint, written from
+    the new link to the rocker: reached only through it, it enters the tree (reversed)."""
+    p = build.rsur()
+    p['mechanism.links'] = p['mechanism.links'] + ['weight']
+    p['links.weight.mass'] = 2.0
+    p['links.weight.com'] = [0.05, 0.01, 0.0]
+    p['links.weight.inertia'] = [1e-3, 2e-3, 2.5e-3, 1e-4, 0.0, 0.0]
+    build.joint(p, 'weld', 'fixed', 'weight', 'rocker', parent_xyz=[0.02, 0.0, 0.0])
+    return p
+
+
+@pytest.mark.parametrize('case', ['rsur_both', 'wrist', 'welded'])
+def test_joints_without_coordinate_in_the_tree(case, tmp_path):
+    """A link reached only through a universal joint (two hidden angles through a virtual
+    cross, here from the joint's child end: 'written' against the tree), a spherical one (a
+    quaternion) or a fixed one: the tree names the joint, the loops name declared joints,
+    the table says 'in the tree', the picture draws every link and joint."""
+    build = closure_joint_builders()
+    params = {'rsur_both': build.rsur_both, 'wrist': lambda: build.wrist(False),
+              'welded': lambda: welded_rsur(build)}[case]()
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', cog_id_ros.AssemblyWarning)
+        mech = cog_id_ros.Mechanism.from_parameters(params)
+    solver = cog_id_ros.InverseDynamics(mech, backend='reference')
+    evaluation = solver.evaluate([mech.assembled_positions[j] for j in mech.active_index])
+    out = tool.format_report(mech, evaluation, 'in memory')
+    check_structure(out, mech)
+    check_closure_rows(out, mech)
+    tree = parse_tree(out)
+    link, parent, joint, kind, written = {
+        'rsur_both': ('coupler', 'rocker', 'uni', 'universal', ('coupler', 'rocker')),
+        'wrist': ('plate', None, 'ball', 'spherical', None),
+        'welded': ('weight', 'rocker', 'weld', 'fixed', ('weight', 'rocker'))}[case]
+    assert tree[link] == (parent, joint, kind, False, written)
+    assert '.cross' not in out
+    assert IN_TREE[kind] in out
+    picture = tmp_path / f'{case}.png'
+    mechanism_plot.draw_mechanism(str(picture), mech, mech.assembled_coordinates)
+    check_picture(picture)
+    pose = mechanism_plot.Pose(mech, mech.assembled_coordinates)
+    assert [name for name, *_ in pose.links] == list(mech.links)
+    assert {j['name'] for j in pose.joints} == set(mech.joints) | set(mech.closure_joints)
+    for j in pose.joints:                # every joint closed at the assembled pose
+        if j['kind'] != 'prismatic':
+            assert np.linalg.norm(j['parent_point'] - j['child_point']) < 1e-9, j['name']
+
+
+def test_the_solver_coordinates_place_the_links():
+    """The picture of a mechanism with hidden coordinates needs them all (the joints'
+    positions do not place the links a spherical or universal joint reaches); the solver's
+    link poses (cog_poses) give the same picture; and it is the picture of the same
+    mechanism written with revolute joints through massless helper links."""
+    mech = load(CONFIG / 'stewart_6ups_spherical.yaml')
+    assert mech.n_coordinates > len(mech.joints)
+    with pytest.raises(ValueError, match='assembled_coordinates'):
+        mechanism_plot.Pose(mech, mech.assembled_positions)
+    pose = mechanism_plot.Pose(mech, mech.assembled_coordinates)
+    assert mechanism_plot.figure_kind(mech, mech.assembled_coordinates) == 'spatial'
+    solver = cog_id_ros.InverseDynamics(mech, backend='reference')
+    cogs, rotations = solver.cog_poses([mech.assembled_positions[j]
+                                        for j in mech.active_index])
+    again = mechanism_plot.Pose(mech,
+                                mechanism_plot.frames_from_cog_poses(mech, cogs, rotations))
+    helper = load(CONFIG / 'stewart_6ups.yaml')
+    twin = {name: (points, cog) for name, points, cog, _ in
+            mechanism_plot.Pose(helper, helper.assembled_positions).links}
+
+    def same_points(a, b):
+        return a.shape == b.shape and all(np.linalg.norm(b - p, axis=1).min() < 1e-9
+                                          for p in a)
+    for (name, points, cog, _), (_, points2, cog2, _) in zip(pose.links, again.links):
+        assert np.abs(points - points2).max() < 1e-12 and np.abs(cog - cog2).max() < 1e-12
+        assert same_points(points, twin[name][0]), name
+        assert np.abs(cog - twin[name][1]).max() < 1e-9, name
+    assert len(pose.base_points) == 6                # the six U joints on the ground
+
+
+@pytest.mark.parametrize('name', SPHERICAL)
+def test_trajectory_snapshots_with_hidden_coordinates(name, tmp_path, capsys):
+    """--trajectory on a mechanism whose links hang from spherical and universal joints in
+    the tree: the snapshots are drawn at the poses the solver reached (its link poses)."""
+    mech = load(CONFIG / f'{name}.yaml')
+    times = np.linspace(0.0, 2.0, 301)
+    start = np.array([mech.assembled_positions[j] for j in mech.active_index])
+    amplitude = 0.03 if name.startswith('stewart') else 0.3
+    csv = tmp_path / 'motion.csv'
+    with open(csv, 'w') as out:
+        out.write('time,' + ','.join(f'{j}.position' for j in mech.active_joints) + '\n')
+        for t in times:
+            q = start + amplitude * np.sin(np.pi * t + np.arange(len(start)))
+            out.write(f'{t:.6f},' + ','.join(f'{x:.12g}' for x in q) + '\n')
+    picture = tmp_path / 'motion.png'
+    status, out, err = run_main(capsys, '--params-file', CONFIG / f'{name}.yaml', '--plot',
+                                picture, '--trajectory', csv, '--snapshots', '3')
+    assert status == 0, err
+    assert re.search(r'solved (\d+) of \1 rows', out)
+    assert 'snapshots: t = 0, 1, 2 s' in out
+    check_picture(picture)
+    solver = cog_id_ros.InverseDynamics(mech, backend='reference')
+    motion = tool.solve_trajectory(mech, solver, str(csv), 3, sys.stderr)
+    assert len(motion.snapshots) == len(motion.snapshot_links) == 3
+    for (t, q), (cogs, rotations) in zip(motion.snapshots, motion.snapshot_links):
+        assert len(q) == len(mech.joints)
+        expected = start + amplitude * np.sin(np.pi * t + np.arange(len(start)))
+        assert q[mech.active_index] == pytest.approx(expected, abs=1e-8)
+        pose = mechanism_plot.Pose(mech, mechanism_plot.frames_from_cog_poses(mech, cogs,
+                                                                              rotations))
+        for j in pose.joints:            # the links' poses close every joint there
+            gap = np.linalg.norm(j['parent_point'] - j['child_point'])
+            if j['kind'] == 'prismatic':
+                assert gap == pytest.approx(abs(q[mech.joints.index(j['name'])]), abs=1e-9)
+            else:
+                assert gap < 1e-9, (t, j['name'])
 
 
 def test_redundant_actuation_lists_roles_and_weights(capsys):
