@@ -230,19 +230,64 @@ class KinematicModel:
     def start(self, positions):
         """Every coordinate at the start of assembly: ``positions`` (one per joint), the
         universal joints' angles at 0 (their attachment frames coincide), and each spherical
-        tree joint turned so that the link it reaches has its frame parallel to the base
-        frame (a link is described in its home orientation; the ball has no angle to give)."""
+        tree joint turned so that the link it reaches puts its other joint centres where
+        their partners are (a least-squares fit of the rotation, :func:`_fitted_rotation`);
+        with fewer than two such centres, its frame parallel to the base frame."""
         q = list(positions) + list(self.hidden_start)
         for e in self.edges:
             if e.kind != 'ball':
                 continue
-            parent = forward_kinematics(self, q, sp.ScalarOps).rot[e.parent] \
-                if e.parent != BASE else sp.IDENTITY
+            frames = forward_kinematics(self, q, sp.ScalarOps)
+            parent = frames.rot[e.parent] if e.parent != BASE else sp.IDENTITY
+            child = self._fitted_rotation(e, frames) or sp.IDENTITY
             turn = sp.mat_mat(sp.mat_mat(sp.transpose(e.r0), sp.transpose(parent)),
-                              sp.transpose(e.r1))
+                              sp.mat_mat(child, sp.transpose(e.r1)))
             for c, value in zip(e.coords, sp.rotation_quaternion(turn)):
                 q[c] = value
         return q
+
+    def _fitted_rotation(self, e, frames):
+        """The rotation of ``e``'s child link that best carries the centres of its other
+        joints (revolute, spherical, universal, fixed: their two attachment origins
+        coincide) to their partners' centres on links outside its subtree, about the ball's
+        centre (Kabsch); None with fewer than two independent directions."""
+        import numpy as np
+        outside = self._outside(e.child)
+        centre = point_to_base(frames, e.parent, e.origin_p)
+        own = sp.mat_t_vec(e.r1, sp.scale(e.t1, -1.0))      # the ball's centre on the child
+        pairs = []
+        for spec in self.joints + self.closures:
+            if spec.kind == 'prismatic' or spec.name == e.name:
+                continue
+            for near, far, near_xyz, far_xyz in ((spec.child, spec.parent, spec.child_xyz,
+                                                  spec.parent_xyz),
+                                                 (spec.parent, spec.child, spec.parent_xyz,
+                                                  spec.child_xyz)):
+                if near == e.child and far in outside:
+                    pairs.append((sp.sub(near_xyz, own),
+                                  sp.sub(point_to_base(frames, far, far_xyz), centre)))
+        if len(pairs) < 2:
+            return None
+        u = np.array([a for a, _ in pairs])
+        v = np.array([b for _, b in pairs])
+        left, values, right = np.linalg.svd(u.T @ v)
+        if values[1] <= 1e-9 * max(values[0], 1e-300):
+            return None
+        d = np.sign(np.linalg.det(right.T @ left.T)) or 1.0
+        rotation = right.T @ np.diag([1.0, 1.0, d]) @ left.T
+        return tuple(float(x) for x in rotation.ravel())
+
+    def _outside(self, link):
+        """The links (and the base) not in the subtree of ``link``."""
+        out = {BASE}
+        for k in range(self.n_links):
+            j = k
+            while j != BASE and j != link:
+                index = self.edge_of_link[j]
+                j = self.edges[index].parent
+            if j == BASE:
+                out.add(k)
+        return out
 
     def _cycle(self, path, sign):
         """(coordinate, sign) of every coordinate of the tree edges on ``path``."""

@@ -350,3 +350,28 @@ def test_position_and_effort_limits_of_the_native_schema():
     p['joints.crank_joint.effort'] = 0.0
     with pytest.raises(cog_id_ros.MechanismConfigError, match='joints.crank_joint.effort'):
         cog_id_ros.Mechanism.from_parameters(p)
+
+
+def test_a_platform_described_turned_round_is_assembled_on_the_same_branch():
+    """The platform of the native Stewart platform described with its frame turned by pi
+    about z (attachment points, COG and inertia written in that frame): the same body, so
+    the same torques. The ball joint that carries it in the tree starts where the platform's
+    other joint centres meet their partners (not with its frame parallel to the base, which
+    assembled it on another branch)."""
+    _, q, qd, qdd = sample('stewart_6ups_spherical.yaml', 60)
+    params = load_params_file(config_path('stewart_6ups_spherical.yaml'))
+    expected = cog_id_ros.InverseDynamics(
+        cog_id_ros.Mechanism.from_parameters(dict(params))).torques(q, qd, qdd)
+    turned = dict(params)
+    flip = np.array([-1.0, -1.0, 1.0])
+    for key, value in params.items():
+        if key.startswith('joints.') and key.endswith('.child_xyz') and \
+                params[key.replace('child_xyz', 'child')] == 'platform':
+            turned[key] = (np.array(value) * flip).tolist()
+    turned['links.platform.com'] = (np.array(params['links.platform.com']) * flip).tolist()
+    ixx, iyy, izz, ixy, ixz, iyz = params['links.platform.inertia']
+    turned['links.platform.inertia'] = [ixx, iyy, izz, ixy, -ixz, -iyz]
+    mech = cog_id_ros.Mechanism.from_parameters(turned)
+    for backend in BACKENDS:
+        got = cog_id_ros.InverseDynamics(mech, backend=backend).torques(q, qd, qdd)
+        assert np.abs(got - expected).max() < 1e-10 * np.abs(expected).max(), backend
