@@ -496,15 +496,24 @@ class Mechanism:
         if self._deferred_error is not None:
             raise self._deferred_error
         if m < self.dof:
+            hidden = n - len(self.joints)
+            moving = self._free_with_actuators_held(matrix)
             raise MechanismConfigError(
                 'mechanism.active_joints',
                 f'{m} active joint(s) for {self.dof} degrees of freedom (closure rank '
-                f'{self.closure_rank} of {n} joint coordinates at the assembled initial '
-                f'positions): the motion is not determined; add active joints, or, if the '
-                f'mechanism has fewer freedoms than that, it is at a singular pose there (e.g. '
-                f'three revolute joints written for a spherical one, with the middle one at '
-                f'+-pi/2: gimbal lock; write it as `type: spherical`, or change '
-                f'initial_positions)')
+                f'{self.closure_rank} of {n} coordinates'
+                + (f', {hidden} of them hidden: the spherical and universal joints in the '
+                   f'spanning tree' if hidden else '')
+                + ', at the assembled initial positions): the motion is not determined'
+                + (f": with every actuator held, {', '.join(moving)} can still move" if moving
+                   else '')
+                + '; add active (revolute or prismatic) joints, or remove the idle freedom: a '
+                  'link between two spherical joints (a rod with a ball at each end) spins '
+                  'about the line through their centres, so write one of them as `type: '
+                  'universal`; or, if the mechanism has fewer freedoms than that, it is at a '
+                  'singular pose there (e.g. three revolute joints written for a spherical '
+                  'one, with the middle one at +-pi/2: gimbal lock; write it as `type: '
+                  'spherical`, or change initial_positions)')
         self.primary = self._choose_primary(matrix)
         self.primary_joints = [self.active_index[i] for i in self.primary]
         #: (index into active_joints, joint index) of each primary actuator
@@ -512,6 +521,22 @@ class Mechanism:
         fixed = set(self.primary_joints)
         self.free_joints = [j for j in range(n) if j not in fixed]
         self.inverse_torque_weights = [1.0 / w for w in self.torque_weights]
+
+    def _free_with_actuators_held(self, matrix):
+        """Names of the joints that can still move with every actuator held: those whose
+        coordinates the null space of the closure Jacobian's other columns moves."""
+        held = set(self.active_index)
+        free = [j for j in range(self.n_coordinates) if j not in held]
+        if not free or not matrix.size:
+            return []
+        _, values, vt = np.linalg.svd(matrix[:, free])
+        scale = max(1.0, values[0]) if values.size else 1.0
+        null = vt[int(np.sum(values > RANK_TOLERANCE * scale)):]
+        if not null.size:
+            return []
+        names = self.model.coordinate_joints
+        return list(dict.fromkeys(names[free[k]] for k in
+                                  np.flatnonzero(np.abs(null).max(axis=0) > 1e-6)))
 
     def _choose_primary(self, matrix):
         """Indices (into active_joints) of ``dof`` actuators whose coordinates determine all

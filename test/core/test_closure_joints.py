@@ -375,3 +375,18 @@ def test_a_platform_described_turned_round_is_assembled_on_the_same_branch():
     for backend in BACKENDS:
         got = cog_id_ros.InverseDynamics(mech, backend=backend).torques(q, qd, qdd)
         assert np.abs(got - expected).max() < 1e-10 * np.abs(expected).max(), backend
+
+
+def test_a_link_between_two_ball_joints_is_refused_naming_what_can_still_move():
+    """The R-S-U-R coupler with a ball joint at each end spins idly about the line through
+    their centres: refused at load, naming the joints that move with the crank held and the
+    fix (one of them universal), not only 'add active joints' (spherical joints cannot be)."""
+    p = rsur_both()
+    p['joints.uni.type'] = 'spherical'
+    del p['joints.uni.axis'], p['joints.uni.axis2']
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(p)
+    text = str(info.value)
+    assert info.value.parameter == 'mechanism.active_joints', text
+    assert 'with every actuator held, sph can still move' in text, text
+    assert 'hidden' in text and '`type: universal`' in text, text

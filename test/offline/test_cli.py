@@ -439,3 +439,16 @@ def test_shipped_target_trajectory_is_the_paper_motion(tmp_path):
         np.testing.assert_allclose(traj.columns[f'{j}.position'], theta, atol=1e-15)
         np.testing.assert_allclose(traj.columns[f'{j}.velocity'], dtheta, atol=1e-14)
         np.testing.assert_allclose(traj.columns[f'{j}.acceleration'], ddtheta, atol=1e-13)
+
+
+def test_a_column_of_a_joint_without_coordinate_is_ignored_not_unknown(tmp_path):
+    """A universal or spherical joint is a joint of the mechanism: its column is ignored
+    with the note every passive joint's gets, not refused as an unknown joint."""
+    t = np.arange(5) * 0.001
+    csv = write_csv(tmp_path / 'in.csv', {
+        'time': t, **{f'l{i}_p.position': 0.1325576213264454 + 0.0 * t for i in range(6)},
+        'l0_u.position': 0.0 * t})
+    proc = run_tool('--params-file', CONFIG / 'stewart_6ups_spherical.yaml', '--input', csv,
+                    '--output', tmp_path / 'out.csv', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert 'ignoring l0_u.position: not an active joint' in proc.stderr, proc.stderr
