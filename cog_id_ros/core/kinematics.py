@@ -26,6 +26,8 @@ ones; a velocity basis, a Newton increment or a step limit has one entry per coo
 from collections import deque
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from . import spatial as sp
 from .errors import MechanismConfigError
 
@@ -251,7 +253,6 @@ class KinematicModel:
         joints (revolute, spherical, universal, fixed: their two attachment origins
         coincide) to their partners' centres on links outside its subtree, about the ball's
         centre (Kabsch); None with fewer than two independent directions."""
-        import numpy as np
         outside = self._outside(e.child)
         centre = point_to_base(frames, e.parent, e.origin_p)
         own = sp.mat_t_vec(e.r1, sp.scale(e.t1, -1.0))      # the ball's centre on the child
@@ -303,9 +304,9 @@ class KinematicModel:
         if spec.kind == 'universal':         # two revolutes through a massless cross
             cross = self._virtual_link(f'{spec.name}.cross')
             first, second = self._hidden(spec, ('axis', 'axis2'), 'revolute', (0.0, 0.0))
-            outer = JointSpec(f'{spec.name}', True, spec.parent, cross, spec.parent_xyz,
+            outer = JointSpec(spec.name, True, spec.parent, cross, spec.parent_xyz,
                               spec.parent_rpy, ZERO3, ZERO3, spec.axis)
-            inner = JointSpec(f'{spec.name}', True, cross, spec.child, ZERO3, ZERO3,
+            inner = JointSpec(spec.name, True, cross, spec.child, ZERO3, ZERO3,
                               spec.child_xyz, spec.child_rpy, spec.axis2)
             hops = ((first, outer, cross), (second, inner, other)) if near == 'parent' else \
                 ((second, inner, cross), (first, outer, other))

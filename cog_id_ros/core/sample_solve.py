@@ -40,6 +40,13 @@ NEWTON_ITERATIONS = 12
 #: largest Newton increment (rad or m) applied at once; longer ones are scaled down
 NEWTON_MAX_INCREMENT = 0.5
 
+#: after a Newton increment below this (rad or m) the loops are probably closed (Newton
+#: converges quadratically: the next residual is of the order of its square times the
+#: mechanism's curvature, below the closure tolerance at control rate), so the whole record
+#: is evaluated at once; after a larger one (a continuation step far from the pose, a batch
+#: anchor) only the closure kernel, until the increments get small
+LIKELY_CLOSED = 1e-4
+
 #: a Newton increment below this (rad or m) is checked for stagnation: below 1e-15 of the
 #: coordinates' size (a larger one cannot be, for coordinates within MAX_ANGLE or lengths)
 STAGNATION = 1e-5
@@ -147,9 +154,9 @@ class SampleSolver:
         """Newton's method on the loop equations from ``q``, moving the free joints.
 
         Returns (q, PoseRecord at q, iterations, closed); when not closed the record is
-        where Newton stopped. The cheap closure kernel is used only where the pose is
-        probably not closed (a prediction); after an increment, or when ``likely_closed``,
-        the whole record is evaluated at once."""
+        where Newton stopped. The cheap closure kernel is used where the pose is probably
+        not closed (a prediction, or after an increment of LIKELY_CLOSED or more); after a
+        small increment, or when ``likely_closed``, the whole record is evaluated at once."""
         kernels, tol, free = self.kernels, self.tolerance, self.free
         whole = likely_closed
         record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
@@ -171,8 +178,8 @@ class SampleSolver:
             q = list(q)
             for k, j in enumerate(free):
                 q[j] = q[j] - increment[k] * factor
-            record = kernels.dynamics(q, goal, qd, qdd)
-            whole = True
+            whole = size * factor < LIKELY_CLOSED
+            record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
         if not whole:
             record = kernels.dynamics(q, goal, qd, qdd)
         return q, record, iteration, False
