@@ -88,7 +88,7 @@ class Batch:
             record, positions, ok, errors, new_state = self.positions(
                 state, q, on_invalid, invalid=~finite, qd=qd, qdd=qdd)
             tau = record.torques.copy()
-            residual = np.abs(record.residual).max(axis=1, initial=0.0)
+            residual = record.worst.copy()
             condition = record.condition.copy()
         for i, exc in errors_in.items():
             errors[i] = exc
@@ -220,11 +220,12 @@ class Batch:
                             ClosureRecord)
             done = self.closed(record)
             converged[todo[done]] = True
+            size = record.largest_step
             if iteration == NEWTON_ITERATIONS:
                 done[:] = True            # the last pass: every sample stops where it is
                 record = record._replace(increment=np.where(
                     converged[todo][:, None], record.increment, 0.0))
-            size = np.abs(record.increment).max(axis=1, initial=0.0)
+                size = np.where(converged[todo], size, 0.0)
             with np.errstate(divide='ignore', invalid='ignore'):
                 factor = np.where(size > NEWTON_MAX_INCREMENT, NEWTON_MAX_INCREMENT / size, 1.0)
             factor = np.where(np.isfinite(factor), factor, 0.0)
@@ -236,8 +237,7 @@ class Batch:
 
     def closed(self, record):
         """(N,) bool: the loops of each sample are closed (as SampleSolver.close decides)."""
-        return ((np.abs(record.residual).max(axis=1, initial=0.0) <
-                 self.mechanism.closure_tolerance) & (record.cosines > 0.0).all(axis=1))
+        return (record.worst < self.mechanism.closure_tolerance) & (record.least_cosine > 0.0)
 
     def record(self, flat):
         return unpack(flat, self.kernels.layouts['dynamics'], PoseRecord)

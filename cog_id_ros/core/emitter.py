@@ -33,6 +33,9 @@ PYTHON_EXPRESSIONS = {
     'sub': '{0} - {1}',
     'mul': '{0} * {1}',
     'div': '{0} / {1}',
+    'abs': 'abs({0})',
+    'max': '({0} if {0} > {1} or {0} != {0} else {1})',     # spatial.larger: keeps a NaN
+    'min': '({0} if {0} < {1} or {0} != {0} else {1})',     # spatial.smaller
 }
 
 
@@ -125,6 +128,9 @@ C_EXPRESSIONS = {
     'sub': '{0} - {1}',
     'mul': '{0} * {1}',
     'div': '{0} / {1}',
+    'abs': 'fabs({0})',
+    'max': '({0} > {1} || {0} != {0} ? {0} : {1})',
+    'min': '({0} < {1} || {0} != {0} ? {0} : {1})',
 }
 
 _C_PRELUDE = r"""/* Kernels of one mechanism, emitted by cog_id_ros.core.emitter: do not edit. */

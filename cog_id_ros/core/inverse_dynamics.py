@@ -230,7 +230,7 @@ class InverseDynamics:
         positions = np.array([state[0]])
         return Evaluation(np.array([record.torques]), np.array([True]), [None],
                           positions[:, :len(m.joints)], positions[:, m.active_index],
-                          np.array([max(map(abs, record.residual), default=0.0)]),
+                          np.array([record.worst]),
                           np.array([record.condition]))
 
     def _poses(self, q, qd):

@@ -50,10 +50,13 @@ TRACE_BUDGET = 2500
 
 
 class ClosureRecord(NamedTuple):
-    """The loop equations at a pose q."""
+    """The loop equations at a pose q, and the three numbers Newton's method decides by."""
     residual: tuple     # Phi(q): 6 equations per constraint (closure.py)
     cosines: tuple      # per constraint, cosine of its frames' angle (> 0: not a half-turn)
     increment: tuple    # A_f^+ Phi, the Newton increment of the free joints (q_f -= increment)
+    worst: float        # max |residual| (NaN if any is NaN)
+    least_cosine: float  # min of the cosines and 1.0
+    largest_step: float  # max |increment|
 
 
 class PredictionRecord(NamedTuple):
@@ -67,6 +70,9 @@ class PoseRecord(NamedTuple):
     residual: tuple
     cosines: tuple
     increment: tuple
+    worst: float
+    least_cosine: float
+    largest_step: float
     condition: float    # Frobenius condition number of the free columns of A
     torques: tuple      # tau_m of eq. (7), active_joints order
     basis: tuple        # rows of the velocity basis V of the free joints (dof each)
@@ -77,8 +83,10 @@ def closure_record(mechanism, q, ops):
     """(pose, ClosureRecord) at q by the lane code."""
     pose = closure.evaluate(mechanism.model, q, mechanism.free_joints, ops)
     residual = [r for st in pose.loops for r in st.residual]
-    return pose, ClosureRecord(residual, [st.cosine for st in pose.loops],
-                               pose.lsq.solve(residual))
+    cosines = [st.cosine for st in pose.loops]
+    increment = pose.lsq.solve(residual)
+    return pose, ClosureRecord(residual, cosines, increment, ops.maxabs(residual),
+                               ops.least(cosines), ops.maxabs(increment))
 
 
 def pose_record(mechanism, q, target, qd, qdd, ops):
@@ -88,8 +96,7 @@ def pose_record(mechanism, q, target, qd, qdd, ops):
     tau = inverse_dynamics(mechanism, pose, basis, qd, qdd, ops)
     projection = (projection_increment(mechanism, basis, q, target, ops)
                   if mechanism.is_redundant else [])
-    return PoseRecord(closed.residual, closed.cosines, closed.increment,
-                      pose.lsq.condition_number(), tau,
+    return PoseRecord(*closed, pose.lsq.condition_number(), tau,
                       [basis[j] for j in mechanism.free_joints], projection)
 
 
@@ -105,7 +112,8 @@ def layouts(mechanism):
     m = mechanism
     n, n_free, dof, n_act = m.n_coordinates, len(m.free_joints), m.dof, len(m.active_joints)
     n_loops = len(m.model.constraints)
-    closing = [('residual', (6 * n_loops,)), ('cosines', (n_loops,)), ('increment', (n_free,))]
+    closing = [('residual', (6 * n_loops,)), ('cosines', (n_loops,)), ('increment', (n_free,)),
+               ('worst', ()), ('least_cosine', ()), ('largest_step', ())]
     return {'prediction': [('predicted', (n,)), ('moved', (n,))],
             'closure': closing,
             'dynamics': closing + [('condition', ()), ('torques', (n_act,)),

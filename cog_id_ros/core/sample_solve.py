@@ -161,16 +161,14 @@ class SampleSolver:
         whole = likely_closed
         record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
-            residual = record.residual
-            if (max(map(abs, residual)) if residual else 0.0) < tol and \
-                    (not record.cosines or min(record.cosines) > 0.0):
+            if record.worst < tol and record.least_cosine > 0.0:
                 if not whole:
                     record = kernels.dynamics(q, goal, qd, qdd)
                 return q, record, iteration, True
             if iteration == NEWTON_ITERATIONS:
                 break
             increment = record.increment
-            size = max(map(abs, increment))
+            size = record.largest_step
             if not size < math.inf or size < STAGNATION and \
                     size < 1e-15 * (1.0 + max(abs(q[j]) for j in free)):
                 break                               # NaN or infinite, or stagnated
@@ -224,7 +222,7 @@ def _fmt(values):
 
 
 def not_closed(record, tolerance, iterations, sample):
-    residual = max(map(abs, record.residual))
+    residual = record.worst
     return ClosureError(
         f'{_where(sample)}the loops cannot be closed at this setpoint: closure residual '
         f'{residual:.3g} (tolerance {tolerance:.3g}) after {iterations} Newton iterations',

@@ -35,7 +35,30 @@ class ScalarOps:
 
     @staticmethod
     def maxabs(lanes):
-        return max(map(abs, lanes)) if lanes else 0.0
+        """The largest |lane| (0.0 for none); NaN if any lane is NaN (as numpy's max)."""
+        return _fold(larger, map(abs, lanes), 0.0)
+
+    @staticmethod
+    def least(lanes):
+        """The smallest lane, 1.0 for none (cosines are at most 1); NaN if any is NaN."""
+        return _fold(smaller, lanes, 1.0)
+
+
+def larger(a, b):
+    """max(a, b) that keeps a NaN of either operand (the C emitter writes the same)."""
+    return a if a > b or a != a else b
+
+
+def smaller(a, b):
+    """min(a, b) that keeps a NaN of either operand."""
+    return a if a < b or a != a else b
+
+
+def _fold(pick, lanes, start):
+    out = start
+    for x in lanes:
+        out = pick(out, x)
+    return out
 
 
 class ArrayOps:
@@ -59,6 +82,12 @@ class ArrayOps:
         if not lanes:
             return 0.0
         return np.max(np.abs(np.broadcast_arrays(*lanes)), axis=0)
+
+    @staticmethod
+    def least(lanes):
+        if not lanes:
+            return 1.0
+        return np.minimum(np.min(np.broadcast_arrays(*lanes), axis=0), 1.0)
 
 
 # --- 3-vectors -------------------------------------------------------------------------

@@ -158,6 +158,22 @@ def _unary(op, fold):
     return staticmethod(apply)
 
 
+def _pick(op, fold):
+    """A NaN-keeping max or min of two lanes (spatial.larger, spatial.smaller)."""
+    def apply(a, b):
+        if _is_const(a) and _is_const(b):
+            return fold(a, b)
+        graph = (a if isinstance(a, Sym) else b).graph
+        return graph.node(op, (a if isinstance(a, Sym) else float(a),
+                               b if isinstance(b, Sym) else float(b)))
+    return apply
+
+
+_larger = _pick('max', lambda a, b: a if a > b or a != a else b)
+_smaller = _pick('min', lambda a, b: a if a < b or a != a else b)
+_abs = _unary('abs', abs).__func__
+
+
 class SymOps:
     """Lane functions for symbolic lanes (the counterpart of spatial.ScalarOps)."""
     sin = _unary('sin', math.sin)
@@ -167,8 +183,21 @@ class SymOps:
 
     @staticmethod
     def maxabs(lanes):
-        """Not traced: the largest |lane| is a comparison; callers take it from the outputs."""
-        return math.nan
+        """spatial.ScalarOps.maxabs, traced: abs and a NaN-keeping max, branch-free (a max
+        with a constant 0.0 start is the other operand, an abs being at least 0 or NaN)."""
+        out = 0.0
+        for x in lanes:
+            a = _abs(x)
+            out = a if _is_const(out) and out == 0.0 and not _is_const(a) else _larger(out, a)
+        return out
+
+    @staticmethod
+    def least(lanes):
+        """spatial.ScalarOps.least, traced (every cosine is at most 1.0, the start)."""
+        out = 1.0
+        for x in lanes:
+            out = _smaller(out, x)
+        return out
 
 
 def leaves(value):
