@@ -1,13 +1,16 @@
 """Source code from a traced graph (straight_line.py): the only place code is built as text.
 
-A kernel is emitted as one function of plain float statements, one recorded operation a
-line, that returns a named record (kernels.py)::
+A kernel is emitted as one function of plain float statements that returns a named record
+(kernels.py). In C every recorded operation is a line; in Python an operation used only once
+is written into the expression that uses it (a store and a load fewer per operation, about
+half the time of the Python kernels; the same operations on the same operands, so the same
+numbers)::
 
     def dynamics(q, target, qd, qdd):
         q_0, q_1, q_2, q_3 = q
         ...
         t17 = sin(q_1)
-        t18 = 0.25 * t17
+        t19 = (0.25 * t17) + (t17 * q_0)
         ...
         return new(PoseRecord, (
             (t40, t41, t45),  # residual
@@ -57,10 +60,17 @@ def python_source(name, params, record, fields):
     def operand(a):
         return names[a] if isinstance(a, int) else _literal(a)
 
+    inline = _inlined(graph, operations, outputs)
+    depth = {}
     for k in operations:
         op, args = graph.nodes[k]
-        names[k] = f't{k}'
-        lines.append(f'    t{k} = {PYTHON_EXPRESSIONS[op].format(*map(operand, args))}')
+        text = PYTHON_EXPRESSIONS[op].format(*map(operand, args))
+        deepest = 1 + max((depth.get(a, 0) for a in args if isinstance(a, int)), default=0)
+        if k in inline and deepest <= INLINE_DEPTH:
+            names[k], depth[k] = f'({text})', deepest    # written where its one use is
+        else:
+            names[k] = f't{k}'
+            lines.append(f'    t{k} = {text}')
 
     def literal(value):
         if isinstance(value, (list, tuple)):
@@ -72,6 +82,29 @@ def python_source(name, params, record, fields):
     lines += [f'        {literal(value)},  # {field}' for field, value in fields]
     lines.append('    ))')
     return '\n'.join(lines) + '\n', len(operations)
+
+
+#: how deep single-use operations are written into the expression that uses them
+INLINE_DEPTH = 12
+
+
+def _inlined(graph, operations, outputs):
+    """The operations the Python emitter writes into their only user's expression instead of
+    a variable of their own (a store and a load fewer, the same operations in an order
+    that gives the same numbers: every operation is a pure function of its operands).
+    Those used once, by an operation whose expression names that operand once (not the
+    conditional ones, sqrt, recip, max, min), and not an output."""
+    uses = {}
+    for k in operations:
+        op, args = graph.nodes[k]
+        for a in args:
+            if isinstance(a, int):
+                uses[a] = uses.get(a, 0) + (1 if PYTHON_EXPRESSIONS[op].count('{') ==
+                                            len(args) else 2)
+    for o in outputs:
+        if isinstance(o, Sym):
+            uses[o.k] = uses.get(o.k, 0) + 2
+    return {k for k in operations if uses.get(k) == 1}
 
 
 def _program(params, fields):

@@ -188,6 +188,8 @@ class SymOps:
         out = 0.0
         for x in lanes:
             a = _abs(x)
+            if _is_const(a) and a == 0.0:
+                continue                  # max(out, 0.0) is out: out is at least 0, or NaN
             out = a if _is_const(out) and out == 0.0 and not _is_const(a) else _larger(out, a)
         return out
 
