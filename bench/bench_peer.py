@@ -105,6 +105,32 @@ def per_sample(solver, peer, q, qd, qdd):
     return {k: statistics.median(v[20:]) for k, v in times.items()}
 
 
+#: rounds of the side-by-side batch measurement (--oracle)
+ROUNDS = 7
+
+
+def batch_over_oracle(mech, kwargs, oracle, motion, batch):
+    """Our batch rate over the oracle's per-sample rate, measured side by side: each round
+    times the oracle on 100 consecutive samples of the 1 kHz motion (median) and then one
+    batch call of ours on ``batch`` (a fresh solver); the median over ROUNDS rounds of
+    (samples / batch seconds) x (oracle seconds per sample). The machine's speed drifts from
+    minute to minute; a ratio taken within one round is not fooled by it."""
+    q, qd, qdd = motion
+    ratios = []
+    for r in range(ROUNDS):
+        start = (r * 100) % (len(q) - 100)
+        times = []
+        for i in range(start, start + 100):
+            t0 = time.perf_counter()
+            oracle.torques(q[i], qd[i], qdd[i])
+            times.append(time.perf_counter() - t0)
+        fresh = cog_id_ros.InverseDynamics(mech, **kwargs)
+        t0 = time.perf_counter()
+        fresh.torques(*batch)
+        ratios.append(len(batch[0]) / (time.perf_counter() - t0) * statistics.median(times))
+    return statistics.median(ratios)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--backend', default=None,
@@ -124,7 +150,8 @@ def main(argv=None):
              and (n in TWINS or n not in NOT_FOR_ORACLE)]     # (the peers read no URDF)
     head = ('mechanism', 'joints', 'loops', 'DOF', 'backend', 'ours us', 'peer us', 'ours/peer',
             'batch /s', 'peer /s', 'batch/peer', 'load s', 'load MB', 'cached load s',
-            'peer load s', 'check') + (('oracle us', 'ours/oracle') if args.oracle else ())
+            'peer load s', 'check') + (('oracle us', 'ours/oracle', 'batch/oracle (rounds)')
+                                       if args.oracle else ())
     rows = []
     for name in names:
         path = os.path.join(REPO, 'config', name)
@@ -166,7 +193,8 @@ def main(argv=None):
                 oracle.torques(q[i], qd[i], qdd[i])
                 times.append(time.perf_counter() - t0)
             slow = statistics.median(times[20:])
-            row += (f'{slow * 1e6:.1f}', f'{med["ours"] / slow:.3f}')
+            row += (f'{slow * 1e6:.1f}', f'{med["ours"] / slow:.3f}',
+                    f'{batch_over_oracle(mech, kwargs, oracle, (q, qd, qdd), (qb, qdb, qddb)):.0f}')
         rows.append(row)
         print(f'  {name}: done', file=sys.stderr, flush=True)
     print('| ' + ' | '.join(head) + ' |')
@@ -178,7 +206,9 @@ def main(argv=None):
           'Mechanism.from_params_file + InverseDynamics in a fresh process with an empty kernel '
           'cache (trace, compile), its peak RSS growth, and again from that cache; '
           'check: largest |ours - peer| / max |tau| at the checked samples; oracle: the test '
-          "oracle's median per sample (--oracle).")
+          "oracle's median per sample (--oracle); batch/oracle (rounds): our batch rate "
+          "over the oracle's per-sample rate, each round timing both side by side, the median "
+          f'over {ROUNDS} rounds (--oracle).')
 
 
 if __name__ == '__main__':
