@@ -202,17 +202,19 @@ class Batch:
         converged &= self.closed(self.record(flat))     # (after the last increment too)
         if not m.is_redundant:
             return q, flat, converged, np.zeros(len(q))
-        for _ in range(PROJECTION_ITERATIONS):
+        for _ in range(PROJECTION_ITERATIONS):      # each sample until its increment is small
             record = self.record(flat)
-            dz = record.projection
-            if np.all(np.abs(dz).max(axis=1) < PROJECTION_TOLERANCE):
+            todo = np.flatnonzero(np.abs(record.projection).max(axis=1) >= PROJECTION_TOLERANCE)
+            if not todo.size:
                 break
-            basis = self.basis(record)
-            moved = projected_pose(m, columns(q), [columns(row) for row in basis.swapaxes(0, 1)],
-                                   columns(dz))
-            q, converged = self.newton(np.column_stack(moved))
-            flat = self.kernels.dynamics_many(q, qa, qd, qdd)
-            converged &= self.closed(self.record(flat))
+            part = self.record(flat[todo])
+            basis = self.basis(part)
+            moved = projected_pose(m, columns(q[todo]),
+                                   [columns(row) for row in basis.swapaxes(0, 1)],
+                                   columns(part.projection))
+            q[todo], converged[todo] = self.newton(np.column_stack(moved))
+            flat[todo] = self.kernels.dynamics_many(q[todo], qa[todo], qd[todo], qdd[todo])
+            converged[todo] &= self.closed(self.record(flat[todo]))
         return q, flat, converged, np.abs(q[:, m.active_index] - qa).max(axis=1)
 
     def newton(self, q):
