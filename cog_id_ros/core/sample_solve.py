@@ -48,7 +48,8 @@ NEWTON_MAX_INCREMENT = 0.5
 LIKELY_CLOSED = 1e-4
 
 #: a Newton increment below this (rad or m) is checked for stagnation: below 1e-15 of the
-#: largest coordinate (a larger one cannot be, for coordinates within MAX_ANGLE or lengths)
+#: largest coordinate Newton moves (a larger one cannot be, for coordinates within
+#: MAX_ANGLE or lengths; the actuators, held, may be at any angle)
 STAGNATION = 1e-5
 
 #: Gauss-Newton iterations of the redundant projection, and the increment that ends it
@@ -170,7 +171,7 @@ class SampleSolver:
             increment = record.increment
             size = record.largest_step
             if not size < math.inf or size < STAGNATION and \
-                    size < 1e-15 * (1.0 + max(map(abs, q))):
+                    size < 1e-15 * (1.0 + max(map(abs, map(q.__getitem__, free)))):
                 break                               # NaN or infinite, or stagnated
             factor = min(1.0, NEWTON_MAX_INCREMENT / size)
             q = list(q)
