@@ -1,9 +1,13 @@
-"""Spherical, universal and fixed joints: loop closures without a coordinate.
+"""Spherical, universal and fixed joints: loop closures, and joints of the spanning tree
+with hidden coordinates where nothing else reaches a link.
 
 Each is checked against the same mechanism written with revolute joints through massless
 helper links (the only way before), which must give the same torques: the helper links
 carry no mass, so the two descriptions are one mechanism.
 """
+import os
+import sys
+
 import numpy as np
 import pytest
 from trajectories import TWINS, config_path, sample
@@ -390,3 +394,57 @@ def test_a_link_between_two_ball_joints_is_refused_naming_what_can_still_move():
     assert info.value.parameter == 'mechanism.active_joints', text
     assert 'with every actuator held, sph can still move' in text, text
     assert 'hidden' in text and '`type: universal`' in text, text
+
+
+def stacked_platforms(native):
+    """Two Stewart platforms stacked (bench/mechanism_family.ups_platform twice): the upper
+    one's legs stand on the lower platform, so two links (the platforms) are reached only
+    through spherical joints, one above the other: two quaternions in the tree, the second
+    started from the first. ``native`` False: every S and U as revolute joints through
+    massless links (the twin)."""
+    bench = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..', 'bench')
+    if bench not in sys.path:
+        sys.path.insert(0, bench)
+    import mechanism_family as family
+    lower, _ = family.ups_platform(6, native=native)
+    upper, _ = family.ups_platform(6, native=native)
+    p = dict(lower)
+
+    def renamed(name):
+        return 'platform' if name == 'ground' else f'up_{name}'
+
+    for key, value in upper.items():
+        if key.startswith('links.') or key.startswith('joints.'):
+            group, name, field = key.split('.', 2)
+            if field in ('parent', 'child'):
+                value = renamed(value)
+            p[f'{group}.{renamed(name)}.{field}'] = value
+    for key in ('links', 'joints', 'active_joints'):
+        p[f'mechanism.{key}'] = lower[f'mechanism.{key}'] + [
+            renamed(n) for n in upper[f'mechanism.{key}']]
+    p['mechanism.initial_positions'] = (lower['mechanism.initial_positions'] +
+                                        upper['mechanism.initial_positions'])
+    return p
+
+
+def test_two_platforms_each_reached_only_through_spherical_joints():
+    """Two tree quaternions in a row (a platform on legs that stand on a platform): the
+    torques of the helper-link twin, in a batch and sample by sample."""
+    native = cog_id_ros.Mechanism.from_parameters(stacked_platforms(True))
+    helper = cog_id_ros.Mechanism.from_parameters(stacked_platforms(False))
+    assert native.coordinate_types.count('quaternion') == 8 and native.dof == 12
+    t = np.linspace(0.0, 1.0, 80)[:, None]
+    phase = np.arange(12)[None, :]
+    home = np.array([helper.assembled_positions[helper.joints.index(j)]
+                     for j in native.active_joints])
+    w = 2.0 * np.pi
+    q = home + 0.02 * np.sin(w * t + phase)
+    qd = 0.02 * w * np.cos(w * t + phase)
+    qdd = -0.02 * w * w * np.sin(w * t + phase)
+    expected = cog_id_ros.InverseDynamics(helper, backend='python').torques(q, qd, qdd)
+    scale = np.abs(expected).max()
+    solver = cog_id_ros.InverseDynamics(native)
+    assert np.abs(solver.torques(q, qd, qdd) - expected).max() < 1e-12 * scale
+    solver.reset()
+    serial = np.array([solver.torques(q[i], qd[i], qdd[i]) for i in range(len(q))])
+    assert np.abs(serial - expected).max() < 1e-8 * scale
