@@ -35,7 +35,7 @@ BASE = -1
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-#: joint types with one coordinate, and those that only close loops (no coordinate)
+#: joint types with one coordinate, and those without one of their own (kinematics docstring)
 COORDINATE_TYPES = ('revolute', 'prismatic')
 CLOSURE_TYPES = ('spherical', 'universal', 'fixed')
 #: which of them enters the tree first where a link is out of reach otherwise (fewest

@@ -233,8 +233,8 @@ class Mechanism:
 
     def _read_joints(self, r):
         """Every joint of mechanism.joints: those with a coordinate (revolute, prismatic:
-        ``joints``, ``joint_specs``) and those that only close loops (spherical, universal,
-        fixed: ``closure_joints``, ``closure_specs``)."""
+        ``joints``, ``joint_specs``) and those without one of their own (spherical,
+        universal, fixed: ``closure_joints``, ``closure_specs``)."""
         self.joint_types, self.joint_specs, self.closure_specs = [], [], []
         self.position_limits, self.joint_efforts = [], []
         known = {name: k for k, name in enumerate(self.links)}
