@@ -17,6 +17,8 @@ Only branch-free lane code can be traced: a comparison of a ``Sym`` raises TypeE
 """
 import math
 
+from .spatial import larger, smaller
+
 
 class Graph:
     """The recorded operations: node k is (op, operands); operands are node ids or floats."""
@@ -169,8 +171,8 @@ def _pick(op, fold):
     return apply
 
 
-_larger = _pick('max', lambda a, b: a if a > b or a != a else b)
-_smaller = _pick('min', lambda a, b: a if a < b or a != a else b)
+_larger = _pick('max', larger)
+_smaller = _pick('min', smaller)
 _abs = _unary('abs', abs).__func__
 
 
