@@ -34,16 +34,10 @@ CDR_LE = b'\x00\x01\x00\x00'
 #: bytes before the first double: encapsulation, no dims, data_offset 0, count, padding
 PREFIX_SIZE = 20
 
-_packers = {}
-
 
 def float64_multiarray(data):
     """The serialized Float64MultiArray with ``data`` (floats; no layout dimensions)."""
-    n = len(data)
-    pack = _packers.get(n)
-    if pack is None:
-        pack = _packers[n] = float64_multiarray_packer(n)
-    return pack(*data)
+    return float64_multiarray_packer(len(data))(*data)
 
 
 def float64_multiarray_packer(n):
