@@ -871,7 +871,7 @@ def run(args, stdout, stderr, signals=None):
         # every joint of the mechanism, those without a coordinate too (their columns are
         # ignored like any passive joint's, not called unknown)
         traj = trajectory_io.read_trajectory(
-            args.input, list(mech.joints) + list(getattr(mech, 'closure_joints', ())), active)
+            args.input, list(mech.joints) + list(mech.closure_joints), active)
         for note in traj.notes:
             print(f'{PROG}: note: {args.input}: {note}', file=stderr)
         if getattr(args, 'unwrap', False):

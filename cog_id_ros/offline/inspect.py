@@ -149,7 +149,7 @@ def run(args, stdout, stderr):
     if args.plot:
         # every solver coordinate: the hidden ones of the tree's spherical and universal
         # joints place the links they reach (evaluation.positions has the joints' only)
-        _draw(args, mech, getattr(mech, 'assembled_coordinates', mech.assembled_positions),
+        _draw(args, mech, mech.assembled_coordinates,
               motion, plot_format)
         text += f'\n\nwrote {args.plot}'
     if stdout is None:
@@ -317,7 +317,7 @@ def tree_children(mech, hops=None):
 
 def closure_joints_in_tree(mech):
     """The spherical, universal and fixed joints the solver put in the spanning tree."""
-    closure = set(getattr(mech, 'closure_joints', ()))
+    closure = set(mech.closure_joints)
     return {name for _, name in tree_hops(mech).values() if name in closure}
 
 
@@ -404,7 +404,7 @@ def _cycle_text(mech, loop, hops):
 def format_actuation(mech):
     primary = set(mech.primary)
     n_active = len(mech.active_joints)
-    coordinates = getattr(mech, 'n_coordinates', len(mech.joints))
+    coordinates = mech.n_coordinates
     hidden = coordinates - len(mech.joints)
     if hidden:
         lines = [f'degrees of freedom: {mech.dof} ({coordinates} coordinates - closure rank '

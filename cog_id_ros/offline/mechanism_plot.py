@@ -46,7 +46,7 @@ def link_frames(mech, coordinates):
     mechanism.joints, then the hidden ones of the spherical and universal joints in the
     spanning tree (``mechanism.assembled_coordinates`` at the assembled pose). The joints'
     positions alone do not place a link reached through such a joint."""
-    n = getattr(mech, 'n_coordinates', len(mech.joints))
+    n = mech.n_coordinates
     if len(coordinates) != n:
         raise ValueError(f'{mech.name}: expected all {n} solver coordinates (mechanism.'
                          f'assembled_coordinates; {n - len(mech.joints)} hidden ones of '
