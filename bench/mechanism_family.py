@@ -21,8 +21,10 @@ names, as rclpy gives a node):
 Each generator also returns the same closed initial pose that its inverse kinematics gives
 (``initial_positions``), so every member assembles exactly.
 
-Script mode prints, per member: joints, loops, DOF, the traced operation counts of
-``cog_id_ros.core.kernels.kernels_for(mech, 'python').operations`` and load and trace times:
+Script mode prints, per member: joints, loops, DOF, the coordinates solved for and the traced
+operation counts of ``kernels_for(mech.solver_mechanism, 'python').operations`` (S joints
+written as three revolutes through massless links are solved as spherical joints,
+core/spherical_chains.py) and load and trace times:
 
     .venv/bin/python bench/mechanism_family.py [--max-joints 80] [--family ups|chain|all]
 """
@@ -559,11 +561,14 @@ def measure(index, family):
     t0 = time.perf_counter()
     mech = cog_id_ros.Mechanism.from_parameters(params)
     t1 = time.perf_counter()
-    ops = kernels.kernels_for(mech, 'python').operations
+    # the kernels of what is solved: S joints written as three revolutes through massless
+    # links are solved as spherical joints (core/spherical_chains.py)
+    ops = kernels.kernels_for(mech.solver_mechanism, 'python').operations
     t2 = time.perf_counter()
     return dict(label=label, joints=len(mech.joints), loops=len(mech.joints) - len(mech.links),
                 dof=mech.dof, active=len(mech.active_joints), ops=ops, load=t1 - t0,
-                trace=t2 - t1, peak=_peak_mb() - rss0)
+                trace=t2 - t1, peak=_peak_mb() - rss0,
+                solved=mech.solver_mechanism.n_coordinates)
 
 
 def main(argv=None):
@@ -584,7 +589,8 @@ def main(argv=None):
     shown = sys.argv[1:] if argv is None else argv
     print('command: ' + ' '.join([os.path.relpath(sys.executable, REPO), 'bench/mechanism_family.py'] + shown))
     print(f'date: {datetime.datetime.now().isoformat(timespec="seconds")}')
-    head = ('member', 'joints', 'loops', 'DOF', 'active', 'prediction ops', 'closure ops',
+    head = ('member', 'joints', 'loops', 'DOF', 'active', 'solved coordinates',
+            'prediction ops', 'closure ops',
             'dynamics ops', 'load ms', 'trace s', 'peak RSS +MB')
     print('| ' + ' | '.join(head) + ' |')
     print('|' + '---|' * len(head))
@@ -601,14 +607,16 @@ def main(argv=None):
             continue
         m = json.loads(out.stdout.strip().splitlines()[-1])
         ops = m['ops']
-        row = (label, m['joints'], m['loops'], m['dof'], m['active'],
+        row = (label, m['joints'], m['loops'], m['dof'], m['active'], m['solved'],
                f'{ops.get("prediction", 0):,}', f'{ops.get("closure", 0):,}',
                f'{ops.get("dynamics", 0):,}', f'{m["load"] * 1e3:.1f}', f'{m["trace"]:.2f}',
                f'{m["peak"]:.0f}')
         print('| ' + ' | '.join(str(x) for x in row) + ' |', flush=True)
     print('ops: float operations of the traced straight-line kernels '
-          "(kernels_for(mech, 'python').operations); load: Mechanism.from_parameters; trace: "
-          "kernels_for(mech, 'python'); peak RSS: growth of the process's peak over both.")
+          "(kernels_for(mech.solver_mechanism, 'python').operations: S joints written as "
+          'three revolutes through massless links solved as spherical joints); load: '
+          "Mechanism.from_parameters; trace: kernels_for(...); peak RSS: growth of the "
+          "process's peak over both.")
     if skipped:
         print(f'skipped (more than --max-joints {args.max_joints} joints): ' + ', '.join(skipped))
 

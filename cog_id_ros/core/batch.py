@@ -41,7 +41,9 @@ class Evaluation:
     torques (N, M): active-joint torques/forces, 0.0 in rows that are not valid (never NaN)
     valid (N,): bool
     errors: list of N entries, None or the exception that made the sample invalid
-    positions (N, n_joints): every joint coordinate, mechanism.joints order
+    positions (N, n_joints): every joint coordinate, mechanism.joints order (worked out when
+        first read: for chains of revolutes solved as spherical joints it takes a pass of
+        forward kinematics, spherical_chains.py)
     active_positions (N, M): the active coordinates used (projected for redundant actuation)
     closure_residual (N,): max |closure equation| at the solution
     condition_number (N,): closure Jacobian condition number (see mechanism.max_condition_number)
@@ -51,10 +53,20 @@ class Evaluation:
         self.torques = torques
         self.valid = valid
         self.errors = errors
-        self.positions = positions
+        self._positions = positions         # an array, or a function that makes it
         self.active_positions = active_positions
         self.closure_residual = residual
         self.condition_number = condition
+
+    @property
+    def positions(self):
+        if callable(self._positions):
+            self._positions = self._positions()
+        return self._positions
+
+    @positions.setter
+    def positions(self, value):
+        self._positions = value
 
 
 def pose_of(mechanism, positions):
@@ -68,8 +80,9 @@ def pose_of(mechanism, positions):
 class Batch:
     """The batch driver of one mechanism, around its per-sample solver."""
 
-    def __init__(self, mechanism, sample_solver):
+    def __init__(self, mechanism, sample_solver, joints_at):
         self.mechanism = mechanism
+        self.joints_at = joints_at      # the joints as written from the coordinates
         self.serial = sample_solver
         self.kernels = sample_solver.kernels
 
@@ -102,7 +115,7 @@ class Batch:
                 if on_invalid == 'raise':
                     raise errors[i]
         tau[~ok] = 0.0
-        return Evaluation(tau, ok, errors, positions[:, :len(m.joints)],
+        return Evaluation(tau, ok, errors, lambda: self.joints_at(positions)[0],
                           positions[:, m.active_index], residual, condition), new_state
 
     def positions(self, state, qa, on_invalid, invalid=None, qd=None, qdd=None):

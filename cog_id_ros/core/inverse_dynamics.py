@@ -17,7 +17,7 @@ from .batch import Batch, Evaluation, columns, pose_of, stacked
 from .cog_jacobian import cog_poses
 from .errors import CogIdError, MechanismConfigError, SetpointError
 from .inputs import check_values, float_array, one_sample, out_of_range, setpoint_arrays
-from .joint_motion import active_velocity_map, combine
+from .joint_motion import active_velocity_map, combine, velocity_basis
 from .kernels import kernels_for
 from .mechanism import Mechanism
 from .pipeline import cog_jacobians_at, cog_motion, equation_of_motion
@@ -46,10 +46,13 @@ class InverseDynamics:
                 'mechanism', f'must be a cog_id_ros.Mechanism (from Mechanism.from_params_file '
                              f'or from_parameters), got {type(mechanism).__name__}')
         self.mechanism = mechanism
-        kernels = kernels_for(mechanism, backend)
+        # what is solved: the mechanism, or its form with chains of three revolutes as
+        # spherical joints (spherical_chains.py); outputs show the joints as written
+        self._solved = solved = mechanism.solver_mechanism
+        kernels = kernels_for(solved, backend)
         self._backend = kernels.name
-        self._serial = SampleSolver(mechanism, kernels, self.continuation_step)
-        self._batch = Batch(mechanism, self._serial)
+        self._serial = SampleSolver(solved, kernels, self.continuation_step)
+        self._batch = Batch(solved, self._serial, mechanism.joints_at)
         self.reset()
 
     @property
@@ -59,7 +62,7 @@ class InverseDynamics:
 
     def reset(self) -> None:
         """Forget the previous calls: the next one starts from the assembled initial_positions."""
-        m = self.mechanism
+        m = self._solved
         start = list(m.assembled_coordinates)
         q, record, _, _ = self._serial.close(start, [start[j] for j in m.active_index],
                                              self._serial.zeros, self._serial.zeros)
@@ -118,7 +121,7 @@ class InverseDynamics:
     def solve_positions(self, q: ArrayLike) -> np.ndarray:
         """Every joint coordinate (mechanism.joints order): (n_joints,) or (N, n_joints)."""
         at = self._poses(q, None)
-        return self._moved_to(at, at.positions[..., :len(self.mechanism.joints)])
+        return self._moved_to(at, at.positions)
 
     def solve_positions_by_name(self, q: ArrayLike) -> Dict[str, Union[float, np.ndarray]]:
         """:meth:`solve_positions` keyed by joint name: {name: coordinate} for every joint of
@@ -142,9 +145,8 @@ class InverseDynamics:
         without ``qd``.
         """
         m, (q, basis) = self.mechanism, self._state
-        n = len(m.joints)                  # (the hidden coordinates are no joint's)
         if qd is None:
-            return list(q[:n]), None
+            return m.joints_at(q)[0].tolist(), None
         n_act = len(m.active_joints)
         rates = qd
         if not (type(qd) is list and len(qd) == n_act and        # what the node passes
@@ -158,10 +160,11 @@ class InverseDynamics:
             if errors:
                 raise errors[0]
             rates = row.tolist()
-        qdot = combine(active_velocity_map(m, basis, sp.ScalarOps), rates)
-        if not all(map(math.isfinite, qdot)):
+        qdot = combine(active_velocity_map(self._solved, basis, sp.ScalarOps), rates)
+        positions, qdot = m.joints_at(q, qdot)
+        if not np.isfinite(qdot).all():
             raise out_of_range(rates, [], None)
-        return list(q[:n]), qdot[:n]
+        return positions.tolist(), qdot.tolist()
 
     def cog_poses(self, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray]:
         """g_i (eq. 1): (positions (..., n_links, 3), rotations (..., n_links, 3, 3))."""
@@ -221,15 +224,15 @@ class InverseDynamics:
         except CogIdError as exc:
             if on_invalid == 'raise':
                 raise
-            positions = np.array([self._state[0]])
+            at = np.array([self._state[0]])
             return Evaluation(np.zeros((1, n_act)), np.array([False]), [exc],
-                              positions[:, :len(m.joints)], positions[:, m.active_index],
+                              lambda: m.joints_at(at)[0], at[:, self._solved.active_index],
                               np.array([getattr(exc, 'residual', math.inf)]),
                               np.array([getattr(exc, 'condition_number', math.inf)]))
         self._state = state
-        positions = np.array([state[0]])
+        at = np.array([state[0]])
         return Evaluation(np.array([record.torques]), np.array([True]), [None],
-                          positions[:, :len(m.joints)], positions[:, m.active_index],
+                          lambda: m.joints_at(at)[0], at[:, self._solved.active_index],
                           np.array([record.worst]),
                           np.array([record.condition]))
 
@@ -241,15 +244,19 @@ class InverseDynamics:
         _, errors = check_values(m, self._serial.wrapping, q, qd, qd, single)
         if errors:
             raise errors[min(errors)]
+        n = len(m.joints)
         if single:
             state = self._serial.solve(self._state, q[0].tolist())[1]
-            pose = closure.evaluate(m.model, list(state[0]), m.free_joints, sp.ScalarOps)
-            return _Poses(np.array(state[0]), pose, state[1], qd[0].tolist(), sp.ScalarOps,
+            at = m.coordinates_as_written(state[0]).tolist()
+            pose = closure.evaluate(m.model, at, m.free_joints, sp.ScalarOps)
+            basis = state[1] if self._solved is m else velocity_basis(m, pose)
+            return _Poses(np.array(at[:n]), pose, basis, qd[0].tolist(), sp.ScalarOps,
                           state, qd, single)
         with np.errstate(all='ignore'):
             _, positions, _, _, state = self._batch.positions(self._state, q, 'raise')
-            pose, basis = pose_of(m, positions)
-        return _Poses(positions, pose, basis, columns(qd), sp.ArrayOps, state, qd, single)
+            at = m.coordinates_as_written(positions)
+            pose, basis = pose_of(m, at)
+        return _Poses(at[:, :n], pose, basis, columns(qd), sp.ArrayOps, state, qd, single)
 
     def _moved_to(self, at, values, keep=False):
         """``values`` computed at ``at``, once known to be finite: the warm start moves to
@@ -266,7 +273,7 @@ class InverseDynamics:
 
 
 class _Poses(NamedTuple):
-    positions: np.ndarray      # every coordinate (hidden ones too): (n,) or (N, n)
+    positions: np.ndarray      # every joint of mechanism.joints: (n_joints,) or (N, n_joints)
     pose: object               # closure.ClosureSolution on floats or (N,) lanes
     basis: list                # velocity basis V (list over joints)
     rates: list                # thetadot as lanes

@@ -20,7 +20,7 @@ import warnings
 
 import numpy as np
 
-from . import closure
+from . import closure, spherical_chains
 from . import kinematics as kin
 from . import spatial as sp
 from .errors import MechanismConfigError
@@ -84,12 +84,15 @@ class AssemblyWarning(UserWarning):
 class Mechanism:
     """Links, joints and actuators of a (closed-link) mechanism; see docs/mechanism.md."""
 
-    def __init__(self, params):
+    def __init__(self, params, _chains=()):
         reader = ParameterReader(params)
         self.parameters = dict(reader.params)
         self.assembly_warnings = []
         self._deferred_error = None
         self._moved_actuators = None
+        # made by another Mechanism as its solver form: the spherical joints that stand for
+        # its chains of three revolutes (spherical_chains.py)
+        self._stands_for = list(_chains)
         self._read_mechanism(reader)
         self._read_links(reader)
         self._read_joints(reader)
@@ -111,6 +114,7 @@ class Mechanism:
                 f'geometry and initial_positions') from None
         #: kernels made for this mechanism, by backend (kernels.kernels_for): they go with it
         self.kernels_made = {}
+        self._solver_form()
         # what the kernels are made of stays what it was read as: read-only from here on
         self._frozen = True
 
@@ -365,7 +369,7 @@ class Mechanism:
         self.joint_index = {name: k for k, name in enumerate(self.joints)}
         self.link_index = {name: k for k, name in enumerate(self.links)}
         self.active_index = [self.joint_index[name] for name in self.active_joints]
-        start = self.model.start(self.initial_positions)
+        start = self._started(self.model.start(self.initial_positions))
         q, residual, ok = closure.assemble(self.model, start, self.closure_tolerance,
                                            fixed=self.active_index)
         if not ok:
@@ -402,6 +406,74 @@ class Mechanism:
                                f'closure')
         self._assembled(q)
         self._report_far_moves(start, q)
+
+    def _started(self, start):
+        """The start of assembly, with the quaternion of every tree spherical joint that
+        stands for a chain of three revolutes at the chain's initial angles."""
+        chains = {chain.name: chain for chain in self._stands_for}
+        for e in self.model.edges:
+            chain = chains.get(e.name)
+            if e.kind != 'ball' or chain is None:
+                continue
+            turn = spherical_chains.initial_turn(chain)
+            if e.child != self.link_index.get(chain.child, BASE):   # reached from C's side
+                turn = sp.transpose(turn)
+            for c, value in zip(e.coords, sp.rotation_quaternion(turn)):
+                start[c] = value
+        return start
+
+    def _solver_form(self):
+        """What the solver solves (``solver_mechanism``): this mechanism, or, where three
+        revolute joints through massless links are one spherical joint (spherical_chains.py,
+        ``spherical_chains``), the same mechanism with those chains as spherical joints; and
+        ``joints_at``'s way back to the joints as written."""
+        self.spherical_chains, self.solver_mechanism, self._readout = [], self, None
+        if self._stands_for:
+            return
+        massless = [mass == 0.0 and not any(inertia)
+                    for mass, inertia in zip(self.link_mass, self.link_inertia)]
+        chains = spherical_chains.find_chains(
+            self.links, self.base_link, massless, self.joint_specs, self.closure_specs,
+            set(self.active_joints), self.assembled_positions)
+        if not chains:
+            return
+        params = spherical_chains.solver_parameters(self.parameters, chains, self.joints,
+                                                    self.assembled_positions)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter('ignore', AssemblyWarning)
+                solver = Mechanism(params, _chains=chains)
+        except MechanismConfigError:
+            return                      # (not seen: the joints as written are solved)
+        if solver.dof != self.dof:
+            return
+        self.spherical_chains, self.solver_mechanism = chains, solver
+        self._readout = spherical_chains.JointReadout(self, solver)
+
+    def joints_at(self, coordinates, rates=None):
+        """(positions, rates or None) of ``joints`` from the coordinates of
+        ``solver_mechanism`` (and their rates): (n,) -> (len(joints),), (N, n) -> (N,
+        len(joints)); the chains' angles read back from the pose."""
+        if self._readout is None:
+            q = np.asarray(coordinates, dtype=float)[..., :len(self.joints)]
+            return q, None if rates is None else \
+                np.asarray(rates, dtype=float)[..., :len(self.joints)]
+        return self._readout(coordinates, rates)
+
+    def coordinates_as_written(self, coordinates):
+        """Every coordinate of ``model`` (the joints, then its hidden ones) at the pose of
+        the solver form's ``coordinates``: (n,) or (N, n) -> (model.n_coordinates,) or (N,
+        ...). Hidden ones of this model are closed onto the joints' positions (load-time
+        Newton, per sample): for inspection, not for control rate."""
+        if self._readout is None:
+            return np.asarray(coordinates, dtype=float)
+        positions = self.joints_at(coordinates)[0]
+        if self.model.n_coordinates == len(self.joints):
+            return positions
+        rows = [closure.assemble(self.model, self.model.start(row.tolist()),
+                                 self.closure_tolerance, fixed=range(len(self.joints)))[0]
+                for row in np.atleast_2d(positions)]
+        return np.array(rows[0] if positions.ndim == 1 else rows)
 
     def _assembled(self, q):
         #: every coordinate of the solver at the assembled pose (hidden ones included)

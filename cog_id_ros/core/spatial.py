@@ -245,6 +245,15 @@ def rpy_matrix(rpy):
             -sp, cp * sr, cp * cr)
 
 
+def matrix_rpy(r):
+    """(roll, pitch, yaw) of a rotation matrix, the inverse of :func:`rpy_matrix` (at
+    pitch +-pi/2, where only roll - yaw or roll + yaw is defined, roll 0)."""
+    pitch = math.atan2(-r[6], math.hypot(r[0], r[3]))
+    if math.hypot(r[7], r[8]) < 1e-12:
+        return (0.0, pitch, math.atan2(-r[1], r[4]))
+    return (math.atan2(r[7], r[8]), pitch, math.atan2(r[3], r[0]))
+
+
 def skew(u):
     """The matrix K with K v = u x v."""
     return (0.0, -u[2], u[1], u[2], 0.0, -u[0], -u[1], u[0], 0.0)

@@ -401,6 +401,22 @@ def _cycle_text(mech, loop, hops):
     return ' '.join(words)
 
 
+def format_spherical_chains(mech):
+    """What the solver takes as spherical joints: chains of three revolute joints through
+    two massless links (core/spherical_chains.py), and the coordinates that leaves it."""
+    chains = mech.spherical_chains
+    if not chains:
+        return []
+    solver = mech.solver_mechanism
+    text = (f'solved as spherical joints: {len(chains)} chain(s) of three revolute joints '
+            f'through massless links (' +
+            '; '.join(f"{', '.join(c.joints)}" for c in chains) +
+            f'): the solver has {solver.n_coordinates} coordinates and '
+            f'{len(solver.model.constraints)} closure constraints; the angles are read back '
+            f'for the outputs')
+    return textwrap.wrap(text, WIDTH, initial_indent='  ', subsequent_indent='    ')
+
+
 def format_actuation(mech):
     primary = set(mech.primary)
     n_active = len(mech.active_joints)
@@ -415,6 +431,7 @@ def format_actuation(mech):
     else:
         lines = [f'degrees of freedom: {mech.dof} ({coordinates} joint coordinates - closure '
                  f'rank {mech.closure_rank})']
+    lines += format_spherical_chains(mech)
     if mech.is_redundant:
         lines.append(f'active joints: {n_active} for {mech.dof} DOF (redundant); the torques '
                      f'minimise sum(w_k tau_k^2), w = torque_weights:')

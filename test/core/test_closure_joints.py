@@ -298,15 +298,18 @@ def test_a_spherical_joint_in_the_tree_matches_three_revolutes_and_never_locks()
     assert evaluation.positions.shape == (len(q), 3)
 
 
-def test_a_tree_spherical_joint_turns_through_the_helper_links_gimbal_lock():
-    """Plate pitched from 0 to 1.7 rad about y, held there by the legs: the helper-link
-    twin's middle angle passes pi/2 and it refuses the motion (singular); the native ball
-    follows the whole way, with the twin's torques wherever the twin still has them."""
+def test_a_tree_spherical_joint_turns_through_the_helper_links_gimbal_lock(monkeypatch):
+    """Plate pitched from 0 to 1.7 rad about y, held there by the legs. Solved as written,
+    the helper-link twin's middle angle passes pi/2 and it refuses the motion (singular);
+    the native ball follows the whole way. The twin as loaded is solved as the ball its
+    chain stands for (spherical_chains.py): it follows too, with the native torques, and
+    reads its angles back on the other branch past the lock (the same rotation)."""
     native = cog_id_ros.Mechanism.from_parameters(wrist(False))
     helper = cog_id_ros.Mechanism.from_parameters(wrist(True))
+    assert [c.joints for c in helper.spherical_chains] == [('ball_x', 'ball_y', 'ball_z')]
     ball = [helper.joints.index(j) for j in ('ball_x', 'ball_y', 'ball_z')]
     legs = [helper.joints.index(f'p{i}') for i in range(3)]
-    from cog_id_ros.core import closure
+    from cog_id_ros.core import closure, spherical_chains
     q = list(helper.assembled_coordinates)
     pitches = np.linspace(0.0, 1.7, 171)
     lengths = []
@@ -316,16 +319,28 @@ def test_a_tree_spherical_joint_turns_through_the_helper_links_gimbal_lock():
         assert ok
         lengths.append([q[j] for j in legs])
     lengths = np.array(lengths)
-    with pytest.raises(cog_id_ros.CogIdError) as info:       # the helper links lock
-        cog_id_ros.InverseDynamics(helper).torques(lengths)
-    assert info.value.reason in ('singular', 'unreachable'), info.value
     solver = cog_id_ros.InverseDynamics(native)
     assert np.abs(solver.solve_positions(lengths) - lengths).max() < 1e-12
     solver.reset()
     got = np.array([solver.sample_torques(x.tolist()) for x in lengths])
     assert np.isfinite(got).all()
+    twin = cog_id_ros.InverseDynamics(helper).evaluate(lengths)
+    assert np.abs(twin.torques - got).max() < 1e-8 * np.abs(got).max()
+    angles = twin.positions[:, ball]
+    before = pitches < 1.5
+    assert np.abs(angles[before] - [[0.0, p, 0.0] for p in pitches[before]]).max() < 1e-8
+    after = pitches > 1.6          # x and z half a turn away, y mirrored: the same rotation
+    # (x and z near the lock: the closure tolerance over the sine of the distance to it)
+    assert np.abs(np.abs(angles[after][:, [0, 2]]) - np.pi).max() < 1e-6
+    assert np.abs(angles[after, 1] - (np.pi - pitches[after])).max() < 1e-8
+    monkeypatch.setattr(spherical_chains, 'find_chains', lambda *args: [])
+    as_written = cog_id_ros.Mechanism.from_parameters(wrist(True))
+    assert as_written.solver_mechanism is as_written
+    with pytest.raises(cog_id_ros.CogIdError) as info:       # the helper links lock
+        cog_id_ros.InverseDynamics(as_written).torques(lengths)
+    assert info.value.reason in ('singular', 'unreachable'), info.value
     before = pitches < 1.3
-    expected = cog_id_ros.InverseDynamics(helper).torques(lengths[before])
+    expected = cog_id_ros.InverseDynamics(as_written).torques(lengths[before])
     assert np.abs(got[before] - expected).max() < 1e-8 * np.abs(expected).max()
 
 
