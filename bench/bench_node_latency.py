@@ -34,9 +34,9 @@ every setpoint here is valid). A block that lost commands counts the loss and gi
 latencies. Messages lost = setpoints sent - commands received after a drain of 0.3 s per
 block. The first ``WARM_UP`` answers of each block are left out of the percentiles (a
 block starts a new stream: the node's estimator restarts). After each rate, the own
-compute time per setpoint of each cog_id_node (the ``--compare`` one too; receipt to
-publication, from its /diagnostics) is reported too, which separates the node's work from
-transport and executor. Not a test: it prints a table (and ``--json`` writes the rows).
+compute time per setpoint of each cog_id_node (the ``--compare`` one too; receipt to the
+command ready to send, from its /diagnostics) and the time of the command's publish after
+it are reported too, which separates the node's work from transport and executor. Not a test: it prints a table (and ``--json`` writes the rows).
 """
 import argparse
 import json
@@ -163,8 +163,10 @@ class Driver:
                 self.diagnostics[ns] = {kv.key: kv.value for kv in status.values}
 
     def node_compute_times(self, namespaces):
-        """{namespace: (median, max)}: each cog_id_node's own compute time per setpoint (its
-        /diagnostics, over its last 1000 setpoints), from reports made after the run."""
+        """{namespace: (median, max, publish median)}: each cog_id_node's own compute time
+        per setpoint, receipt to command ready to send, and the time of the command's publish
+        after it (its /diagnostics, over its last 1000 setpoints), from reports made after
+        the run."""
         self.diagnostics = {}
         end = time.perf_counter() + 3.0
         time.sleep(1.2)
@@ -174,7 +176,8 @@ class Driver:
         for ns in namespaces:
             get = self.diagnostics.get(ns, {}).get
             out[ns] = (float(get('compute_time_median_us') or 'nan'),
-                       float(get('compute_time_max_us') or 'nan'))
+                       float(get('compute_time_max_us') or 'nan'),
+                       float(get('publish_time_median_us') or 'nan'))
         return out
 
     def wait_for(self, ns, timeout=30.0):
@@ -344,7 +347,8 @@ def main(argv=None):
             nodes = [(ns, label) for ns, label in peers if ns not in ECHOES]
             times = driver.node_compute_times([ns for ns, _ in nodes])
             for ns, label in nodes:
-                rows[label]['node_compute_p50_us'], rows[label]['node_compute_max_us'] = times[ns]
+                (rows[label]['node_compute_p50_us'], rows[label]['node_compute_max_us'],
+                 rows[label]['node_publish_p50_us']) = times[ns]
             for row in rows.values():
                 results.append(row)
                 print(f'{row["node"]:22s} {rate:6.0f} Hz: sent {row["sent"]:6d} lost '
@@ -382,9 +386,10 @@ def main(argv=None):
               f"pooled medians {s['pooled_diff_us']:+.0f} us; lost {s['lost']} (target 0)")
     for r in results:
         if 'node_compute_p50_us' in r:
-            print(f"  {r['rate_hz']:.0f} Hz {r['node']}'s own compute time per setpoint "
-                  f"(diagnostics, last 1000): median {r['node_compute_p50_us']:.0f} us, "
-                  f"max {r['node_compute_max_us']:.0f} us")
+            print(f"  {r['rate_hz']:.0f} Hz {r['node']}'s own compute time per setpoint, "
+                  f"receipt to command ready to send (diagnostics, last 1000): median "
+                  f"{r['node_compute_p50_us']:.0f} us, max {r['node_compute_max_us']:.0f} us; "
+                  f"then the command's publish: median {r['node_publish_p50_us']:.0f} us")
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump({'rows': results, 'differences': summary}, f, indent=1)

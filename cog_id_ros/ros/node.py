@@ -148,9 +148,13 @@ DIAGNOSTIC_KEYS = {
                             '(more than 1: every setpoint gets several commands)',
     'last_closure_residual': 'max closure equation residual at the last served pose, m or rad',
     'closure_condition_number': 'condition number of the closure Jacobian there',
-    'compute_time_median_us': 'from receipt of a setpoint to its command, last 1000',
+    'compute_time_median_us': "from receipt of a setpoint to its command ready to send (the "
+                              "solve and the node's own work), last 1000",
     'compute_time_max_us': 'the same, maximum',
     'compute_time_samples': 'setpoints in the two figures above',
+    'publish_time_median_us': "the command's publish (the DDS write to its subscribers) "
+                              'after that, last 1000',
+    'publish_time_max_us': 'the same, maximum',
     'seconds_since_last_setpoint': 'monotonic seconds since the last accepted setpoint',
     'last_rejection': 'kind and message of the last rejected setpoint',
 }
@@ -235,6 +239,7 @@ class CogIdNode(Node):
         self.trajectory_rejected = collections.Counter(
             dict.fromkeys((*REASONS, *TRAJECTORY_REASONS), 0))
         self.compute_times = collections.deque(maxlen=COMPUTE_TIME_WINDOW)
+        self.publish_times = collections.deque(maxlen=COMPUTE_TIME_WINDOW)
         self.last_rejection = ''
         self.last_was_rejected = False
         self.last_pose = None                 # active positions of the last served setpoint
@@ -310,7 +315,9 @@ class CogIdNode(Node):
             f"mechanism '{mech.name}': {len(mech.links)} links, {len(mech.joints)} joints, "
             f"{mech.dof} DOF, active joints {', '.join(self.active_joints)}"
             f"{' (redundant)' if mech.is_redundant else ''}; effort limits: {limits}; "
-            f'setpoint timeout {self.setpoint_timeout:g} s ({self.timeout_behavior})')
+            f'setpoint timeout {self.setpoint_timeout:g} s ({self.timeout_behavior})'
+            + (f'; {len(mech.spherical_chains)} chains of three revolute joints through '
+               f'massless links solved as spherical joints' if mech.spherical_chains else ''))
         for warning in getattr(mech, 'assembly_warnings', None) or ():
             self.get_logger().warning(f'mechanism: {warning}')
         # last: declaring a parameter (rclpy declares the QoS overrides) runs these callbacks
@@ -473,10 +480,14 @@ class CogIdNode(Node):
             tau = np.array(efforts)
             if self.clip(tau):
                 efforts = tau.tolist()
-        # first the command: what control waits for (the compute time ends with it),
-        # published serialized (conversions.EffortMessages.command_for, cdr.py)
-        self.command_pub.publish(self.outputs.command_for(efforts))
-        self.compute_times.append(time.perf_counter() - start)
+        # first the command: what control waits for, published serialized
+        # (conversions.EffortMessages.command_for, cdr.py); the compute time ends when it is
+        # ready to send, the DDS write after that is timed apart (the publish time)
+        command = self.outputs.command_for(efforts)
+        ready = time.perf_counter()
+        self.command_pub.publish(command)
+        self.publish_times.append(time.perf_counter() - ready)
+        self.compute_times.append(ready - start)
         self.effort_pub.publish(self.outputs.state_for(msg.header, received, v_used, efforts))
         self.filter.accept(stamp, q, v)
         self._stamp_rejections = 0
@@ -743,6 +754,7 @@ class CogIdNode(Node):
                 status.message = 'serving setpoints'
         self._period_problems = 0
         times = np.array(self.compute_times) * 1e6
+        sends = np.array(self.publish_times) * 1e6
         since = '' if self.last_setpoint_time is None else \
             f'{time.monotonic() - self.last_setpoint_time:.3f}'
         values = [
@@ -768,6 +780,8 @@ class CogIdNode(Node):
             ('compute_time_median_us', f'{np.median(times):.1f}' if times.size else ''),
             ('compute_time_max_us', f'{times.max():.1f}' if times.size else ''),
             ('compute_time_samples', times.size),
+            ('publish_time_median_us', f'{np.median(sends):.1f}' if sends.size else ''),
+            ('publish_time_max_us', f'{sends.max():.1f}' if sends.size else ''),
             ('seconds_since_last_setpoint', since),
             ('last_rejection', self.last_rejection),
         ]

@@ -607,6 +607,7 @@ def test_diagnostics_report_counts_residual_condition_and_compute_time(nodes):
         assert float(kv['last_closure_residual']) < 1e-9
         assert 1.0 <= float(kv['closure_condition_number']) < 1e6
         assert 0.0 < float(kv['compute_time_median_us']) <= float(kv['compute_time_max_us'])
+        assert 0.0 < float(kv['publish_time_median_us']) <= float(kv['publish_time_max_us'])
         assert kv['backend'] in ('native', 'python')
         assert status.level == DiagnosticStatus.OK, (status.message, kv)
     # a rejected last setpoint turns the status to ERROR until the next good one
