@@ -24,6 +24,16 @@ class ScalarOps:
 
     sin = staticmethod(math.sin)
     cos = staticmethod(math.cos)
+    atan2 = staticmethod(math.atan2)
+
+    @staticmethod
+    def acos(x):
+        """arccos of x clipped to [-1, 1] (rounding may leave a cosine just outside)."""
+        return math.acos(min(1.0, max(-1.0, x)))
+
+    @staticmethod
+    def select(condition, a, b):
+        return a if condition else b
 
     @staticmethod
     def sqrt(x):
@@ -66,6 +76,12 @@ class ArrayOps:
 
     sin = staticmethod(np.sin)
     cos = staticmethod(np.cos)
+    atan2 = staticmethod(np.arctan2)
+    select = staticmethod(np.where)
+
+    @staticmethod
+    def acos(x):
+        return np.arccos(np.clip(x, -1.0, 1.0))
 
     @staticmethod
     def sqrt(x):

@@ -223,70 +223,61 @@ def _rotation(e1, e2, e3, angles):
     return rot
 
 
-# --- reading the angles back (numpy, one sample or N at once) ---------------------------
+# --- reading the angles back (on lanes: floats for one sample, (N,) arrays for N) -------
 
 def chain_turn(chain, rot_p, rot_c):
-    """T (..., 3, 3) from the link rotations of P and C (..., 3, 3) (base frame; identity
-    arrays for the base link)."""
-    fp, fc = np.array(chain.frame_p).reshape(3, 3), np.array(chain.frame_c).reshape(3, 3)
-    return fp.T @ np.swapaxes(rot_p, -1, -2) @ rot_c @ fc
+    """T = frame_p^T R_P^T R_C frame_c from the link rotations of P and C (9-tuples of
+    lanes, base frame; None for the base link)."""
+    relative = sp.mat_mat(sp.transpose(rot_p), rot_c) if rot_p is not None else rot_c
+    if relative is None:
+        relative = sp.IDENTITY
+    return sp.mat_mat(sp.mat_mat(sp.transpose(chain.frame_p), relative), chain.frame_c)
 
 
-def chain_angles(chain, turn):
-    """The three joint coordinates (..., 3) of T (..., 3, 3): the
-    middle one on the root nearest its assembled value, each within pi of it."""
-    e1, e2, e3 = (np.array(e) for e in chain.axes)
-    ref = np.array(chain.reference)
-    te3 = turn @ e3
-    c13, b = float(e1 @ e3), float(e1 @ np.cross(e2, e3))
-    phi = math.atan2(b, c13)
-    spread = np.arccos(np.clip(te3 @ e1, -1.0, 1.0))
-    q2 = np.where(np.abs(_wrap(phi + spread - ref[1])) <= np.abs(_wrap(phi - spread - ref[1])),
-                  phi + spread, phi - spread)
-    v = _rotate(e2, q2, e3)                                     # Rot(e2, q2) e3
-    q1 = _turn_angle(e1, v, te3)
-    p = _rotate(e2, -q2, e1)                                    # Rot(e2, -q2) e1
-    q3 = -_turn_angle(e3, p, np.swapaxes(turn, -1, -2) @ e1)
-    angles = np.stack([q1, q2, q3], axis=-1)
-    return ref + _wrap(angles - ref)
+def chain_angles(chain, turn, ops):
+    """The three joint coordinates (lanes) of T (a 9-tuple of lanes): the middle one on the
+    root nearest its assembled value, each within pi of its assembled value."""
+    e1, e2, e3 = chain.axes
+    ref = chain.reference
+    te3 = sp.mat_vec(turn, e3)
+    phi = math.atan2(sp.dot(e1, sp.cross(e2, e3)), sp.dot(e1, e3))
+    spread = ops.acos(sp.dot(e1, te3))
+    up, down = phi + spread, phi - spread
+    q2 = ops.select(abs(_wrap(up - ref[1])) <= abs(_wrap(down - ref[1])), up, down)
+    q1 = _turn_angle(e1, _rotate(e2, q2, e3, ops), te3, ops)
+    q3 = -_turn_angle(e3, _rotate(e2, -q2, e1, ops), sp.mat_t_vec(turn, e1), ops)
+    return tuple(r + _wrap(q - r) for q, r in zip((q1, q2, q3), ref))
 
 
-def chain_rates(chain, angles, omega):
-    """The three joint rates (..., 3) from the angles (chain_angles) and the
-    angular velocity of C relative to P in frame_p (..., 3)."""
-    e1, e2, e3 = (np.array(e) for e in chain.axes)
-    q = angles
-    w2 = _rotate(e1, q[..., 0], e2)
-    w3 = _rotate(e1, q[..., 0], _rotate(e2, q[..., 1], e3))
-    w1 = np.broadcast_to(e1, w2.shape)
-    # Cramer's rule: at the lock (det 0) the rates are not finite, never an exception
-    with np.errstate(divide='ignore', invalid='ignore'):
-        det = np.sum(w1 * np.cross(w2, w3), axis=-1)
-        return np.stack([np.sum(omega * np.cross(w2, w3), axis=-1),
-                         np.sum(w1 * np.cross(omega, w3), axis=-1),
-                         np.sum(w1 * np.cross(w2, omega), axis=-1)], axis=-1) / det[..., None]
+def chain_rates(chain, angles, omega, ops):
+    """The three joint rates (lanes) from the angles (chain_angles) and the angular
+    velocity of C relative to P in frame_p (3 lanes), by Cramer's rule: at the lock (det 0)
+    they are not finite, never an exception."""
+    e1, e2, e3 = chain.axes
+    w2 = _rotate(e1, angles[0], e2, ops)
+    w3 = _rotate(e1, angles[0], _rotate(e2, angles[1], e3, ops), ops)
+    cross23 = sp.cross(w2, w3)
+    scale = ops.recip(sp.dot(e1, cross23))
+    return (sp.dot(omega, cross23) * scale, sp.dot(e1, sp.cross(omega, w3)) * scale,
+            sp.dot(e1, sp.cross(w2, omega)) * scale)
 
 
-def _rotate(axis, angle, v):
-    """Rot(axis, angle) v for (...,) angles and a constant or (..., 3) v (Rodrigues)."""
-    angle = np.asarray(angle)[..., None]
-    v = np.broadcast_to(v, angle.shape[:-1] + (3,))
-    k = np.broadcast_to(axis, v.shape)
-    return (v * np.cos(angle) + np.cross(k, v) * np.sin(angle) +
-            k * (v @ np.asarray(axis))[..., None] * (1.0 - np.cos(angle)))
+def _rotate(axis, angle, v, ops):
+    """Rot(axis, angle) v (Rodrigues) for a constant unit axis and lanes."""
+    c, s = ops.cos(angle), ops.sin(angle)
+    along = sp.dot(axis, v) * (1.0 - c)
+    return tuple(x * c + k * s + a * along for x, k, a in zip(v, sp.cross(axis, v), axis))
 
 
-def _turn_angle(axis, v, w):
-    """The angle of the rotation about ``axis`` that takes v onto w (both (..., 3), at the
-    same angle to the axis)."""
-    axis = np.asarray(axis)
-    sine = np.cross(v, w) @ axis
-    cosine = np.sum(v * w, axis=-1) - (v @ axis) * (w @ axis)
-    return np.arctan2(sine, cosine)
+def _turn_angle(axis, v, w, ops):
+    """The angle of the rotation about ``axis`` that takes v onto w (at the same angle to
+    the axis)."""
+    return ops.atan2(sp.dot(sp.cross(v, w), axis),
+                     sp.dot(v, w) - sp.dot(v, axis) * sp.dot(w, axis))
 
 
 def _wrap(x):
-    return (x + np.pi) % (2.0 * np.pi) - np.pi
+    return (x + math.pi) % (2.0 * math.pi) - math.pi
 
 
 # --- the joints as written, from the solver's coordinates --------------------------------
@@ -294,7 +285,7 @@ def _wrap(x):
 class JointReadout:
     """Positions and rates of ``mechanism.joints`` from the coordinates of its solver form
     (``mechanism.solver_mechanism``): the joints it kept are copied, the chains' angles read
-    back from the link rotations (numpy; one sample on floats, N on (N,) lanes)."""
+    back from the link rotations (one sample on floats, N on (N,) lanes)."""
 
     def __init__(self, mechanism, solver):
         from .kinematics import BASE
@@ -316,41 +307,30 @@ class JointReadout:
         q = np.asarray(coordinates, dtype=float)
         single = q.ndim == 1
         q = np.atleast_2d(q)
-        n = len(q)
-        positions = np.empty((n, self.n_joints))
-        positions[:, self.kept_joints] = q[:, self.kept_coordinates]
-        ops, lanes = ((sp.ScalarOps, q[0].tolist()) if single else
-                      (sp.ArrayOps, [q[:, j] for j in range(q.shape[1])]))
+        qdot = None if rates is None else np.atleast_2d(np.asarray(rates, dtype=float))
+        ops = sp.ScalarOps if single else sp.ArrayOps
+        lanes = q[0].tolist() if single else list(q.T)
         frames = kin.forward_kinematics(self.model, lanes, ops)
-        twists = qdot = None
-        if rates is not None:
-            qdot = np.atleast_2d(np.asarray(rates, dtype=float))
-            twists = kin.link_twists(self.model, frames, qdot[0].tolist() if single else
-                                     [qdot[:, j] for j in range(qdot.shape[1])])
-            out_rates = np.empty((n, self.n_joints))
-            out_rates[:, self.kept_joints] = qdot[:, self.kept_coordinates]
+        twists = None if qdot is None else kin.link_twists(
+            self.model, frames, qdot[0].tolist() if single else list(qdot.T))
+        positions = np.empty((len(q), self.n_joints))
+        positions[:, self.kept_joints] = q[:, self.kept_coordinates]
+        if twists is not None:
+            joint_rates = np.empty((len(q), self.n_joints))
+            joint_rates[:, self.kept_joints] = qdot[:, self.kept_coordinates]
         for chain, columns, parent, child in self.chains:
-            rot_p, rot_c = _rotation_of(frames, parent, n), _rotation_of(frames, child, n)
-            angles = chain_angles(chain, chain_turn(chain, rot_p, rot_c))
-            positions[:, columns] = angles
+            rot_p = frames.rot[parent] if parent >= 0 else None
+            rot_c = frames.rot[child] if child >= 0 else None
+            angles = chain_angles(chain, chain_turn(chain, rot_p, rot_c), ops)
+            positions[:, columns] = np.array(angles, dtype=float).T
             if twists is not None:
-                relative = (_vector(kin.twist_of(twists, child)[0], n) -
-                            _vector(kin.twist_of(twists, parent)[0], n))
-                frame = np.swapaxes(rot_p, -1, -2) @ relative[..., None]   # in P
-                omega = np.array(chain.frame_p).reshape(3, 3).T @ frame
-                out_rates[:, columns] = chain_rates(chain, angles, omega[..., 0])
+                relative = sp.sub(kin.twist_of(twists, child)[0], kin.twist_of(twists, parent)[0])
+                if rot_p is not None:
+                    relative = sp.mat_t_vec(rot_p, relative)
+                omega = sp.mat_t_vec(chain.frame_p, relative)
+                joint_rates[:, columns] = np.array(chain_rates(chain, angles, omega, ops),
+                                                   dtype=float).T
+        out_rates = None if twists is None else joint_rates
         if single:
-            return positions[0], None if rates is None else out_rates[0]
-        return positions, None if rates is None else out_rates
-
-
-def _rotation_of(frames, link, n):
-    """A link's rotation (base frame) as (n, 3, 3); the identity for the base link."""
-    if link < 0:
-        return np.broadcast_to(np.eye(3), (n, 3, 3))
-    return np.stack([np.broadcast_to(np.asarray(x, dtype=float), (n,))
-                     for x in frames.rot[link]], axis=-1).reshape(n, 3, 3)
-
-
-def _vector(v, n):
-    return np.stack([np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in v], axis=-1)
+            return positions[0], None if out_rates is None else out_rates[0]
+        return positions, out_rates

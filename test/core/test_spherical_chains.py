@@ -167,6 +167,10 @@ def check_as_written(mech, written, name, n=120):
     assert np.abs(a - b).max() < 1e-8
 
 
+def read_0(lanes):
+    return np.array([x[0] for x in lanes])
+
+
 def test_angles_and_rates_read_back():
     """chain_angles and chain_rates invert T = Rot(e1, q1) Rot(e2, q2) Rot(e3, q3) and its
     angular velocity, for the axes of a real chain, away from the lock."""
@@ -183,22 +187,26 @@ def test_angles_and_rates_read_back():
             out = out @ np.array(sp.rotation_about(tuple(axis), float(angle))).reshape(3, 3)
         return out
 
-    turns = np.array([turn(a) for a in angles])
-    assert np.abs(spherical_chains.chain_angles(chain, turns) - angles).max() < 1e-12
+    turns = np.array([turn(a) for a in angles]).reshape(-1, 9)
+    read = spherical_chains.chain_angles(chain, tuple(turns.T), sp.ArrayOps)
+    assert np.abs(np.array(read).T - angles).max() < 1e-12
+    one = spherical_chains.chain_angles(chain, tuple(turns[0].tolist()), sp.ScalarOps)
+    assert all(type(x) is float for x in one) and np.abs(np.array(one) - read_0(read)).max() == 0
     h = 1e-6
     omega = []
     for a, r in zip(angles, rates):    # w from (T(a + h r) - T(a - h r)) / 2h = [w]x T
         d = (turn(a + h * r) - turn(a - h * r)) / (2 * h) @ turn(a).T
         omega.append([d[2, 1], d[0, 2], d[1, 0]])
-    got = spherical_chains.chain_rates(chain, angles, np.array(omega))
-    assert np.abs(got - rates).max() < 1e-7
+    got = spherical_chains.chain_rates(chain, tuple(angles.T), tuple(np.array(omega).T),
+                                       sp.ArrayOps)
+    assert np.abs(np.array(got).T - rates).max() < 1e-7
     # at the lock (Rot(e2, q2) e3 along e1) the rates are huge or not finite, never an
     # exception
     lock = math.atan2(float(e[0] @ np.cross(e[1], e[2])), float(e[0] @ e[2]))
     assert abs(e[0] @ (turn([0.0, lock, 0.0]) @ e[2])) > 1.0 - 1e-12
-    at_lock = spherical_chains.chain_rates(chain, np.array([[0.3, lock, -0.2]]),
-                                           np.array([[0.1, 0.2, 0.3]]))
-    assert at_lock.shape == (1, 3) and not np.abs(at_lock).max() < 1e12
+    at_lock = spherical_chains.chain_rates(chain, (0.3, lock, -0.2), (0.1, 0.2, 0.3),
+                                           sp.ScalarOps)
+    assert not np.abs(np.array(at_lock)).max() < 1e12
 
 
 def test_a_mechanism_with_both_kinds_reads_back_its_hidden_coordinates_too(monkeypatch):
