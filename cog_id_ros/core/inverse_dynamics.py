@@ -15,7 +15,7 @@ from . import closure
 from . import spatial as sp
 from .batch import Batch, Evaluation, columns, pose_of, stacked
 from .cog_jacobian import cog_poses
-from .errors import CogIdError, MechanismConfigError, SetpointError
+from .errors import CogIdError, MechanismConfigError, SetpointError, SingularConfigurationError
 from .inputs import check_values, float_array, one_sample, out_of_range, setpoint_arrays
 from .joint_motion import active_velocity_map, combine, velocity_basis
 from .kernels import kernels_for
@@ -177,7 +177,7 @@ class InverseDynamics:
     def cog_jacobians(self, q: ArrayLike) -> np.ndarray:
         """G_i (eq. 3): (n_links, 6, M) or (N, n_links, 6, M); rows vx vy vz wx wy wz of the
         COG (linear) and the link (angular), base frame."""
-        at = self._poses(q, None)
+        at = self._poses(q, None, velocities=True)
         _, _, jac = cog_jacobians_at(self.mechanism, at.pose, at.basis, at.ops)
         return self._moved_to(at, stacked([[[gv[r] for gv, _ in cols] for r in range(3)] +
                                           [[gw[r] for _, gw in cols] for r in range(3)]
@@ -186,7 +186,7 @@ class InverseDynamics:
     def cog_drifts(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
         """Gdot_i thetadot (eq. 4): (n_links, 6) or (N, n_links, 6): COG acceleration and link
         angular acceleration when thetaddot = 0."""
-        at = self._poses(q, qd)
+        at = self._poses(q, qd, velocities=True)
         with np.errstate(all='ignore'):          # overflow is reported by _moved_to
             _, _, _, drifts = cog_motion(self.mechanism, at.pose, at.basis, at.rates, at.ops)
         return self._moved_to(at, stacked([list(a) + list(alpha) for a, alpha in drifts]))
@@ -194,9 +194,9 @@ class InverseDynamics:
     def equation_of_motion(self, q: ArrayLike, qd: Optional[ArrayLike] = None
                            ) -> Tuple[np.ndarray, np.ndarray]:
         """H (M, M) and B (M,) of eq. (7), tau = H qdd + B; batch: (N, M, M), (N, M)."""
-        at = self._poses(q, qd)
+        at = self._poses(q, qd, solved=True)     # (the links as solved: the same H and B)
         with np.errstate(all='ignore'):          # overflow is reported by _moved_to
-            h, b = equation_of_motion(self.mechanism, at.pose, at.basis, at.rates, at.ops)
+            h, b = equation_of_motion(self._solved, at.pose, at.basis, at.rates, at.ops)
         return self._moved_to(at, stacked(h), keep=True), self._moved_to(at, stacked(b))
 
     # --- helpers ------------------------------------------------------------------------
@@ -236,10 +236,13 @@ class InverseDynamics:
                           np.array([record.worst]),
                           np.array([record.condition]))
 
-    def _poses(self, q, qd):
-        """The closed poses of one sample or a batch (_Poses); the warm start is not moved
-        until :meth:`_moved_to` accepts a result."""
-        m = self.mechanism
+    def _poses(self, q, qd, solved=False, velocities=False):
+        """The closed poses of one sample or a batch (_Poses) of the mechanism as written
+        (of its solver form with ``solved``); the warm start is not moved until
+        :meth:`_moved_to` accepts a result. ``velocities``: the velocity basis is used, so
+        a chain of revolutes solved as a spherical joint (spherical_chains.py) must be away
+        from its gimbal lock, where the joints as written have no rates."""
+        m = self._solved if solved else self.mechanism
         q, qd, _, single = setpoint_arrays(m, q, qd, None)
         _, errors = check_values(m, self._serial.wrapping, q, qd, qd, single)
         if errors:
@@ -250,13 +253,39 @@ class InverseDynamics:
             at = m.coordinates_as_written(state[0]).tolist()
             pose = closure.evaluate(m.model, at, m.free_joints, sp.ScalarOps)
             basis = state[1] if self._solved is m else velocity_basis(m, pose)
-            return _Poses(np.array(at[:n]), pose, basis, qd[0].tolist(), sp.ScalarOps,
-                          state, qd, single)
+            at = _Poses(np.array(at[:n]), pose, basis, qd[0].tolist(), sp.ScalarOps, state,
+                        qd, single)
+        else:
+            with np.errstate(all='ignore'):
+                _, positions, _, _, state = self._batch.positions(self._state, q, 'raise')
+                coordinates = m.coordinates_as_written(positions)
+                pose, basis = pose_of(m, coordinates)
+            at = _Poses(coordinates[:, :n], pose, basis, columns(qd), sp.ArrayOps, state, qd,
+                        single)
+        if velocities and self._solved is not m:
+            self._away_from_locks(at)
+        return at
+
+    def _away_from_locks(self, at):
+        """SingularConfigurationError where the mechanism as written is singular at a pose
+        its solver form is not: a chain of three revolutes at its gimbal lock, whose rates
+        (and so the per-link quantities of the links as written) are not defined there."""
+        m = self.mechanism
         with np.errstate(all='ignore'):
-            _, positions, _, _, state = self._batch.positions(self._state, q, 'raise')
-            at = m.coordinates_as_written(positions)
-            pose, basis = pose_of(m, at)
-        return _Poses(at[:, :n], pose, basis, columns(qd), sp.ArrayOps, state, qd, single)
+            condition = np.atleast_1d(np.asarray(at.pose.lsq.condition_number(), float))
+        bad = np.flatnonzero(~(condition <= m.max_condition_number))
+        if bad.size:
+            k = int(bad[0])
+            chains = '; '.join(', '.join(chain.joints) for chain in m.spherical_chains)
+            raise SingularConfigurationError(
+                f'{"" if at.single else f"sample {k}: "}the joints as written are singular '
+                f'here (closure condition number {condition[k]:.3g} > '
+                f'mechanism.max_condition_number {m.max_condition_number:g}): a chain of three '
+                f'revolute joints solved as a spherical joint ({chains}) is at or near its '
+                f'gimbal lock, where its angles have no rates and the per-link quantities of '
+                f'its links as written are not defined; torques and equation_of_motion are '
+                f'(they are solved with the spherical joint)',
+                condition[k], None if at.single else k)
 
     def _moved_to(self, at, values, keep=False):
         """``values`` computed at ``at``, once known to be finite: the warm start moves to

@@ -627,8 +627,8 @@ class Mechanism:
             if cond < best_cond * (1.0 - 1e-9):    # ties: the first combination
                 best, best_cond = combo, cond
         if best is None or not best_cond <= self.max_condition_number:
-            hint = ''
-            if self.assembly_warnings:
+            hint = self._gimbal_lock_hint()
+            if self.assembly_warnings and not hint:
                 hint = ('; the assembly also had to move joints far from initial_positions ('
                         'see assembly_warnings): most likely the geometry (xyz, rpy, axis) or '
                         'initial_positions are wrong rather than the choice of actuators')
@@ -638,6 +638,24 @@ class Mechanism:
                 f'positions (closure Jacobian condition number {best_cond:.3g}): some passive '
                 f'joints could move with every actuator held{hint}')
         return list(best)
+
+    def _gimbal_lock_hint(self):
+        """What to do where three revolute joints through massless links (a ball joint as
+        written, spherical_chains.py) are near their gimbal lock at the assembled pose."""
+        massless = [mass == 0.0 and not any(inertia)
+                    for mass, inertia in zip(self.link_mass, self.link_inertia)]
+        chains = [chain for chain in spherical_chains.find_chains(
+            self.links, self.base_link, massless, self.joint_specs, self.closure_specs,
+            set(self.active_joints), self.assembled_positions, near_lock=True)
+            if chain.lock_distance < 0.1]
+        if not chains:
+            return ''
+        return ('; ' + '; '.join(', '.join(c.joints) for c in chains) +
+                f" {'are' if len(chains) == 1 else 'are each'} three revolute joints through "
+                f'massless links at or near their gimbal lock (first and last axes '
+                f'{math.degrees(math.asin(min(1.0, min(c.lock_distance for c in chains)))):.2g} '
+                f'degrees from parallel): write such a ball joint as one `type: spherical` '
+                f'joint, which has no lock, or give initial_positions away from it')
 
     @property
     def is_redundant(self):

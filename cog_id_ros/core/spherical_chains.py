@@ -71,13 +71,16 @@ class SphericalChain:
     centre_c: tuple
     axes: tuple          # e1, e2, e3 (frame_p, angles 0), signed as the coordinates turn C
     reference: tuple     # the three joint coordinates at the initial positions
+    lock_distance: float = 1.0   # |e1 x T e3| there: 0 at the gimbal lock
 
 
-def find_chains(links, base_link, massless, specs, closure_specs, active, positions):
+def find_chains(links, base_link, massless, specs, closure_specs, active, positions,
+                near_lock=False):
     """The qualifying chains (module docstring) among revolute and prismatic ``specs``
     (JointSpec, link indices into ``links``, -1 the base), with ``positions`` one per spec.
 
-    ``massless``: per link, True for zero mass and inertia. Returns [SphericalChain]."""
+    ``massless``: per link, True for zero mass and inertia. Returns [SphericalChain].
+    ``near_lock``: also those too near their gimbal lock to qualify (for messages)."""
     degree = [0] * len(links)
     for spec in list(specs) + list(closure_specs):
         for link in (spec.parent, spec.child):
@@ -104,7 +107,7 @@ def find_chains(links, base_link, massless, specs, closure_specs, active, positi
             continue
         chain = _chain(links, base_link, specs, (j1, j2, j3), (p, a, b, c), positions, scale,
                        names | taken)
-        if chain is None:
+        if chain is None or chain.lock_distance < MIN_LOCK_DISTANCE and not near_lock:
             continue
         used |= {a, b}
         taken.add(chain.name)
@@ -165,10 +168,7 @@ def _chain(links, base_link, specs, joints, chain_links, positions, scale, names
     e2 = sp.mat_vec(m1, sp.scale(axis2, s2))
     e3 = sp.mat_vec(sp.mat_mat(m1, m2), sp.scale(axis3, s3))
     reference = tuple(positions[j] for j in joints)
-    w1 = e1
-    w3 = sp.mat_vec(_rotation(e1, e2, e3, reference), e3)
-    if math.hypot(*sp.cross(w1, w3)) < MIN_LOCK_DISTANCE:
-        return None
+    lock_distance = math.hypot(*sp.cross(e1, sp.mat_vec(_rotation(e1, e2, e3, reference), e3)))
     centre_p = sp.add(o1p, sp.mat_vec(r1p, sp.scale(axis1, in_a[0])))
     centre_c = sp.add(o3c, sp.mat_vec(r3c, sp.scale(axis3, in_b[1])))
     name = f'{specs[j1].name}_to_{specs[j3].name}'
@@ -181,7 +181,8 @@ def _chain(links, base_link, specs, joints, chain_links, positions, scale, names
         name=name, joints=tuple(specs[j].name for j in joints),
         helpers=(links[a], links[b]), parent=parent_name, child=child_name,
         frame_p=sp.rpy_matrix(sp.matrix_rpy(r1p)), frame_c=sp.rpy_matrix(sp.matrix_rpy(frame_c)),
-        centre_p=centre_p, centre_c=centre_c, axes=(e1, e2, e3), reference=reference)
+        centre_p=centre_p, centre_c=centre_c, axes=(e1, e2, e3), reference=reference,
+        lock_distance=lock_distance)
 
 
 def solver_parameters(params, chains, joints, positions):

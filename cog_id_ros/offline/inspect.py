@@ -401,6 +401,10 @@ def _cycle_text(mech, loop, hops):
     return ' '.join(words)
 
 
+#: closure equations of a loop-closing joint of each kind (a revolute or prismatic one: 6)
+EQUATIONS = {'spherical': 3, 'universal': 4, 'fixed': 6, 'unit': 1}
+
+
 def format_spherical_chains(mech):
     """What the solver takes as spherical joints: chains of three revolute joints through
     two massless links (core/spherical_chains.py), and the coordinates that leaves it."""
@@ -408,12 +412,13 @@ def format_spherical_chains(mech):
     if not chains:
         return []
     solver = mech.solver_mechanism
+    equations = sum(EQUATIONS.get(lp.kind, 6) for lp in solver.model.constraints)
     text = (f'solved as spherical joints: {len(chains)} chain(s) of three revolute joints '
             f'through massless links (' +
             '; '.join(f"{', '.join(c.joints)}" for c in chains) +
-            f'): the solver has {solver.n_coordinates} coordinates and '
-            f'{len(solver.model.constraints)} closure constraints; the angles are read back '
-            f'for the outputs')
+            f'): the solver has {solver.n_coordinates} coordinates and {equations} closure '
+            f'equations (closure rank {solver.closure_rank}); the angles are read back for '
+            f'the outputs')
     return textwrap.wrap(text, WIDTH, initial_indent='  ', subsequent_indent='    ')
 
 
@@ -582,7 +587,9 @@ def format_closure(mech, evaluation):
     far = condition > 0.1 * mech.max_condition_number
     lines.append(f'  closure Jacobian condition number {condition:.4g} '
                  f'(mechanism.max_condition_number {mech.max_condition_number:g})'
-                 + (': near the limit, a singular pose is close' if far else ''))
+                 + (': near the limit, a singular pose is close' if far else '')
+                 + (' (of the closure as solved: the chains of revolutes as spherical joints)'
+                    if mech.spherical_chains else ''))
     return lines
 
 

@@ -234,3 +234,56 @@ def test_a_mechanism_with_both_kinds_reads_back_its_hidden_coordinates_too(monke
     h, bias = one.equation_of_motion(lengths[3], [0.1, -0.2, 0.3])
     h2, bias2 = other.equation_of_motion(lengths[3], [0.1, -0.2, 0.3])
     assert np.abs(h - h2).max() < 1e-8 and np.abs(bias - bias2).max() < 1e-8
+
+
+def _wrist_legs(pitch):
+    """Leg lengths of the 3-UPS wrist (test_closure_joints.wrist) with the plate pitched by
+    ``pitch`` about y."""
+    c, s = math.cos(pitch), math.sin(pitch)
+    rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    out = []
+    for i in range(3):
+        a = 2.0 * np.pi * i / 3.0
+        base = np.array([0.25 * np.cos(a), 0.25 * np.sin(a), 0.0])
+        top = np.array([0.15 * np.cos(a + 0.6), 0.15 * np.sin(a + 0.6), 0.0])
+        out.append(float(np.linalg.norm([0.0, 0.0, 0.3] + rot @ top - base)) - 0.4)
+    return out
+
+
+def test_through_the_lock_the_torques_and_h_b_go_on_and_per_link_rates_are_refused():
+    """The wrist's ball written x-y-x, started pitched by 0.3 rad and tilted back to home,
+    where its first and last axes line up (the lock): the torques and H, B of eq. (7) are
+    those of the native ball all the way; cog_drifts, which needs the rates of the joints
+    as written, says singular at the lock instead of returning numbers."""
+    p = wrist(True)
+    p['joints.ball_z.axis'] = [1.0, 0.0, 0.0]
+    p['mechanism.initial_positions'] = [0.0, 0.3, 0.0] + _wrist_legs(0.3)
+    native = wrist(False)
+    native['mechanism.initial_positions'] = _wrist_legs(0.3)
+    t = np.linspace(0.0, 1.0, 41)
+    q = np.array([_wrist_legs(0.3 * (1.0 - x)) for x in t])
+    qd = np.gradient(q, t[1], axis=0)
+    qdd = np.gradient(qd, t[1], axis=0)
+    chained = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(p))
+    ball = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(native))
+    assert len(chained.mechanism.spherical_chains) == 1
+    tau, expected = chained.torques(q, qd, qdd), ball.torques(q, qd, qdd)
+    assert np.abs(tau - expected).max() < 1e-9 * np.abs(expected).max()
+    h, b = chained.equation_of_motion(q[-1], qd[-1])
+    assert np.abs(h @ qdd[-1] + b - tau[-1]).max() < 1e-9 * np.abs(tau[-1]).max()
+    with pytest.raises(cog_id_ros.SingularConfigurationError, match='gimbal lock'):
+        chained.cog_drifts(q[-1], qd[-1])
+    drifts = chained.cog_drifts(q[5], qd[5])          # away from the lock: as the ball's
+    assert np.abs(drifts[0] - ball.cog_drifts(q[5], qd[5])[0]).max() < 1e-8
+
+
+def test_a_chain_near_its_lock_at_load_is_named_in_the_error():
+    """Assembled 0.001 rad from the lock the joints as written are singular (the load
+    refuses them) and too near it to be taken as a ball: the message names the chain and
+    says to write it as one spherical joint."""
+    p = wrist(True)
+    p['mechanism.initial_positions'] = [0.0, 1.5706, 0.0] + _wrist_legs(1.5706)
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(p)
+    assert 'ball_x, ball_y, ball_z' in str(info.value) and 'gimbal lock' in str(info.value)
+    assert '`type: spherical`' in str(info.value)
