@@ -112,10 +112,9 @@ def find_chains(links, base_link, massless, specs, closure_specs, active, positi
         used |= {a, b}
         taken.add(chain.name)
         chains.append(chain)
+    # a chain whose helper is another chain's end link is not one joint: left as written
     ends = {chain.parent for chain in chains} | {chain.child for chain in chains}
-    helpers = {h for chain in chains for h in chain.helpers}
-    return [chain for chain in chains if not ends & set(chain.helpers)] \
-        if ends & helpers else chains
+    return [chain for chain in chains if not ends & set(chain.helpers)]
 
 
 def _other(spec, link):
