@@ -234,8 +234,13 @@ class Batch:
         """Newton's method on the loop equations of all samples at once, by the closure
         kernel: each pass evaluates the samples not closed yet. A sample found closed takes
         the increment evaluated with that check too (it costs nothing and makes the pose
-        exact to rounding), and no more passes. Returns (positions, converged (N,))."""
+        exact to rounding), and no more passes; so does one whose increment was below
+        :meth:`exact_step` (Newton's error after a step is of the order of the step squared:
+        the pose is then closed to rounding). Either way the caller checks the closure
+        again in the dynamics record at the final pose (:meth:`close`). Returns
+        (positions, converged (N,))."""
         free, kernels = self.mechanism.free_joints, self.kernels
+        exact = self.exact_step()
         q = np.array(q, dtype=float)
         converged = np.zeros(len(q), bool)
         todo = np.arange(len(q))
@@ -250,6 +255,10 @@ class Batch:
                 record = record._replace(increment=np.where(
                     converged[todo][:, None], record.increment, 0.0))
                 size = np.where(converged[todo], size, 0.0)
+            else:                         # closed to rounding once this increment is taken
+                small = ~done & (size < exact)
+                converged[todo[small]] = True
+                done |= small
             with np.errstate(divide='ignore', invalid='ignore'):
                 factor = np.where(size > NEWTON_MAX_INCREMENT, NEWTON_MAX_INCREMENT / size, 1.0)
             factor = np.where(np.isfinite(factor), factor, 0.0)
@@ -258,6 +267,13 @@ class Batch:
             if not todo.size:
                 break
         return q, converged
+
+    def exact_step(self):
+        """A Newton increment below which the pose it leads to is closed to well within
+        the closure tolerance: 0.01 sqrt(tolerance) (rad or m; 1e-7 at the default 1e-10).
+        After an increment s the residual is about C s^2, C the loops' curvature (about 1
+        per metre on the Stewart platform): this leaves room for C up to 1e4."""
+        return 0.01 * math.sqrt(self.mechanism.closure_tolerance)
 
     def closed(self, record):
         """(N,) bool: the loops of each sample are closed (as SampleSolver.close decides)."""
