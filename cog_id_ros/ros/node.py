@@ -137,6 +137,8 @@ DIAGNOSTIC_KEYS = {
     'setpoints_lost': 'setpoints the single publisher of joint_setpoint sent that never reached '
                       'the node (gaps in its sequence numbers, e.g. a full subscription queue)',
     'stamp_restarts': 'times the estimator restarted after max_stamp_rejections stamp rejections',
+    'setpoints_unstamped': 'accepted setpoints stamped 0, served at their receipt time (its '
+                           'jitter becomes acceleration noise)',
     'trajectories_accepted': 'trajectories answered since start',
     'trajectories_rejected': 'trajectories refused since start (sum of '
                              'trajectories_rejected.<kind>)',
@@ -234,7 +236,8 @@ class CogIdNode(Node):
         self.counts = collections.Counter({'accepted': 0, 'trajectories_accepted': 0,
                                            'trajectories_rejected': 0, 'effort_clipped': 0,
                                            'timeouts': 0, 'internal_errors': 0,
-                                           'setpoints_lost': 0, 'stamp_restarts': 0})
+                                           'setpoints_lost': 0, 'stamp_restarts': 0,
+                                           'setpoints_unstamped': 0})
         self.rejected = collections.Counter(dict.fromkeys(REASONS, 0))
         self.trajectory_rejected = collections.Counter(
             dict.fromkeys((*REASONS, *TRAJECTORY_REASONS), 0))
@@ -251,6 +254,7 @@ class CogIdNode(Node):
         self._last_sequence = None            # publication sequence number of the last setpoint
         self.same_name_nodes = 1              # nodes in the graph with this full name
         self._period_problems = 0             # rejections + clipping since the last report
+        self._period_unstamped = 0            # setpoints stamped 0 since the last report
         self._warned = {}                     # reason -> (monotonic time, suppressed count)
         # joint_setpoint is served by a thread of its own (setpoint_loop.py), trajectories by
         # a thread and a process of their own (TrajectoryWorker), everything else by the
@@ -447,7 +451,8 @@ class CogIdNode(Node):
         try:
             received, v = setpoint_arrays(msg, self.selector)
             stamp = stamp_to_ns(msg.header.stamp)
-            if not stamp:
+            unstamped = not stamp
+            if unstamped:
                 stamp = self._now_ns()
             elif self.max_stamp_lead_ns != math.inf and 0 < (
                     now := self._now_ns()) < stamp - self.max_stamp_lead_ns:
@@ -492,6 +497,8 @@ class CogIdNode(Node):
         self.filter.accept(stamp, q, v)
         self._stamp_rejections = 0
         self.counts['accepted'] += 1
+        if unstamped:
+            self._unstamped()
         self.last_pose = q
         self.last_was_rejected = False
         self.last_setpoint_time = time.monotonic()
@@ -508,6 +515,19 @@ class CogIdNode(Node):
                     self.warn_throttled('internal.joint_states', 'joint_states failed (the '
                                         f'node goes on): {type(exc).__name__}: {exc}',
                                         error=True)
+
+    def _unstamped(self):
+        """A setpoint stamped 0 was served at its receipt time: counted, warned about (the
+        time between receipts jitters against the motion, and its second difference is in
+        the accelerations: torques many times too large at 1 kHz)."""
+        self.counts['setpoints_unstamped'] += 1
+        self._period_unstamped += 1
+        self.warn_throttled(
+            'unstamped', 'setpoint stamped 0: served at its receipt time, so the jitter of '
+            'receipt times against the motion goes into the estimated accelerations (at 1 kHz, '
+            'torques can be many times too large); stamp each setpoint with the time its '
+            'positions are meant for (header.stamp), or send velocities and accelerations '
+            'through effort_trajectory')
 
     def _ros_now_ns(self):
         """The node's clock (ROS time: /clock with use_sim_time) in integer ns."""
@@ -744,6 +764,10 @@ class CogIdNode(Node):
             status.level = DiagnosticStatus.WARN
             status.message = (f'{self.same_name_nodes} nodes with this name: every setpoint '
                               'gets a command from each')
+        elif self._period_unstamped:
+            status.level = DiagnosticStatus.WARN
+            status.message = (f'{self._period_unstamped} setpoint(s) stamped 0 in the last '
+                              'period: accelerations estimated from receipt times (noisy)')
         else:
             status.level = DiagnosticStatus.OK
             if self.last_setpoint_time is None:
@@ -752,7 +776,7 @@ class CogIdNode(Node):
                 status.message = f'setpoint stream stopped ({self.timeout_behavior})'
             else:
                 status.message = 'serving setpoints'
-        self._period_problems = 0
+        self._period_problems = self._period_unstamped = 0
         times = np.array(self.compute_times) * 1e6
         sends = np.array(self.publish_times) * 1e6
         since = '' if self.last_setpoint_time is None else \
@@ -766,6 +790,7 @@ class CogIdNode(Node):
             *((f'rejected.{reason}', count) for reason, count in self.rejected.items()),
             ('setpoints_lost', self.counts['setpoints_lost']),
             ('stamp_restarts', self.counts['stamp_restarts']),
+            ('setpoints_unstamped', self.counts['setpoints_unstamped']),
             ('trajectories_accepted', self.counts['trajectories_accepted']),
             ('trajectories_rejected', self.counts['trajectories_rejected']),
             *((f'trajectories_rejected.{reason}', count)

@@ -315,8 +315,10 @@ def test_typed_subscriber_receives_exactly_the_efforts(nodes, mechanisms):
 
 
 def test_zero_stamps_use_the_receipt_time(nodes, mechanisms):
-    """Stamp 0: differentiated by receipt time; the header goes out as it came in."""
-    _, probes = nodes
+    """Stamp 0: differentiated by receipt time; the header goes out as it came in. The
+    node says so (receipt times jitter: noisy accelerations): a warning, a count and a
+    WARN status in /diagnostics."""
+    procs, probes = nodes
     probe = probes['a']
     n = len(probe.efforts)
     for q in (1.40, 1.41):
@@ -328,6 +330,14 @@ def test_zero_stamps_use_the_receipt_time(nodes, mechanisms):
     assert second.velocity[0] > 0.0          # 0.01 rad over the time between the two receipts
     assert np.isfinite(second.effort[0])
     fresh_stamp(after=time.time_ns())   # stamped setpoints after these receipt times
+    assert procs['a'].wait_for_output('setpoint stamped 0', timeout=10), procs['a'].output
+    # the period with them says so, unless a graver problem of another test shares it
+    assert wait_until(lambda: any(int(values(s).get('setpoints_unstamped', 0)) >= 2
+                                  for _, s in probe.diagnostics))
+    status = next(s for _, s in probe.diagnostics
+                  if int(values(s).get('setpoints_unstamped', 0)) >= 2)
+    assert 'stamped 0' in status.message or status.level == DiagnosticStatus.ERROR or \
+        'rejected, clipped or lost' in status.message, status.message
 
 
 # --- bad setpoints -------------------------------------------------------------------------
