@@ -26,6 +26,7 @@ from . import spatial as sp
 from .errors import MechanismConfigError
 from .kinematics import BASE, CLOSURE_TYPES, COORDINATE_TYPES, JointSpec, KinematicModel
 from .parameters import ParameterReader
+from .pipeline import massless
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
@@ -430,11 +431,7 @@ class Mechanism:
         self.spherical_chains, self.solver_mechanism, self._readout = [], self, None
         if self._stands_for:
             return
-        massless = [mass == 0.0 and not any(inertia)
-                    for mass, inertia in zip(self.link_mass, self.link_inertia)]
-        chains = spherical_chains.find_chains(
-            self.links, self.base_link, massless, self.joint_specs, self.closure_specs,
-            set(self.active_joints), self.assembled_positions)
+        chains = self._chains()
         if not chains:
             return
         params = spherical_chains.solver_parameters(self.parameters, chains, self.joints,
@@ -550,8 +547,7 @@ class Mechanism:
         n = self.n_coordinates
         matrix, _ = closure.closure_jacobian_matrix(self.model, self.assembled_coordinates)
         singular_values = np.linalg.svd(matrix, compute_uv=False) if matrix.size else np.zeros(0)
-        scale = max(1.0, singular_values[0]) if singular_values.size else 1.0
-        self.closure_rank = int(np.sum(singular_values > RANK_TOLERANCE * scale))
+        self.closure_rank = _rank(singular_values)
         self.dof = n - self.closure_rank
         m = len(self.active_joints)
         if self.dof == 0:
@@ -602,8 +598,7 @@ class Mechanism:
         if not free or not matrix.size:
             return []
         _, values, vt = np.linalg.svd(matrix[:, free])
-        scale = max(1.0, values[0]) if values.size else 1.0
-        null = vt[int(np.sum(values > RANK_TOLERANCE * scale)):]
+        null = vt[_rank(values):]
         if not null.size:
             return []
         names = self.model.coordinate_joints
@@ -639,15 +634,19 @@ class Mechanism:
                 f'joints could move with every actuator held{hint}')
         return list(best)
 
+    def _chains(self, near_lock=False):
+        """spherical_chains.find_chains of this mechanism at its assembled pose."""
+        return spherical_chains.find_chains(
+            self.links, self.base_link,
+            [massless(mass, inertia) for mass, inertia in zip(self.link_mass, self.link_inertia)],
+            self.joint_specs, self.closure_specs, set(self.active_joints),
+            self.assembled_positions, max(1.0, self._attachment_scale()), near_lock)
+
     def _gimbal_lock_hint(self):
         """What to do where three revolute joints through massless links (a ball joint as
         written, spherical_chains.py) are near their gimbal lock at the assembled pose."""
-        massless = [mass == 0.0 and not any(inertia)
-                    for mass, inertia in zip(self.link_mass, self.link_inertia)]
-        chains = [chain for chain in spherical_chains.find_chains(
-            self.links, self.base_link, massless, self.joint_specs, self.closure_specs,
-            set(self.active_joints), self.assembled_positions, near_lock=True)
-            if chain.lock_distance < 0.1]
+        chains = [chain for chain in self._chains(near_lock=True)
+                  if chain.lock_distance < 0.1]
         if not chains:
             return ''
         return ('; ' + '; '.join(', '.join(c.joints) for c in chains) +
@@ -702,6 +701,13 @@ def _unit_axis(r, name, default):
     if not norm > 0.0:
         raise MechanismConfigError(name, f'must not be zero-length, got {list(axis)}')
     return tuple(a / norm for a in axis)
+
+
+def _rank(singular_values):
+    """The rank that singular values (descending) give: those above RANK_TOLERANCE times
+    the largest (or times 1, if that is smaller)."""
+    scale = max(1.0, singular_values[0]) if singular_values.size else 1.0
+    return int(np.sum(singular_values > RANK_TOLERANCE * scale))
 
 
 def _condition_number(a):

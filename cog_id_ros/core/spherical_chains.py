@@ -42,10 +42,11 @@ import math
 
 import numpy as np
 
+from . import kinematics as kin
 from . import spatial as sp
 
 #: cosine below which two axes count as perpendicular, and the distance (times the
-#: mechanism's length scale) within which axes count as meeting
+#: mechanism's largest joint offset, at least 1 m) within which axes count as meeting
 PERPENDICULAR = 1e-6
 MEETING = 1e-9
 #: |w1 x w3| at the assembled pose below which a chain is left as written (near its lock)
@@ -74,13 +75,14 @@ class SphericalChain:
     lock_distance: float = 1.0   # |e1 x T e3| there: 0 at the gimbal lock
 
 
-def find_chains(links, base_link, massless, specs, closure_specs, active, positions,
+def find_chains(links, base_link, massless, specs, closure_specs, active, positions, scale,
                 near_lock=False):
     """The qualifying chains (module docstring) among revolute and prismatic ``specs``
     (JointSpec, link indices into ``links``, -1 the base), with ``positions`` one per spec.
 
-    ``massless``: per link, True for zero mass and inertia. Returns [SphericalChain].
-    ``near_lock``: also those too near their gimbal lock to qualify (for messages)."""
+    ``massless``: per link, True for zero mass and inertia; ``scale`` (m) the length that
+    MEETING is a fraction of. Returns [SphericalChain]. ``near_lock``: also those too near
+    their gimbal lock to qualify (for messages)."""
     degree = [0] * len(links)
     for spec in list(specs) + list(closure_specs):
         for link in (spec.parent, spec.child):
@@ -93,7 +95,6 @@ def find_chains(links, base_link, massless, specs, closure_specs, active, positi
     helper = [massless[k] and degree[k] == 2 and len(by_link.get(k, ())) == 2 and
               all(specs[j].kind == 'revolute' and specs[j].name not in active
                   for j in by_link[k]) for k in range(len(links))]
-    scale = _length_scale(specs)
     used, chains, taken = set(), [], set()
     names = {spec.name for spec in list(specs) + list(closure_specs)}
     for j2, middle in enumerate(specs):
@@ -119,11 +120,6 @@ def find_chains(links, base_link, massless, specs, closure_specs, active, positi
 
 def _other(spec, link):
     return spec.child if spec.parent == link else spec.parent
-
-
-def _length_scale(specs):
-    lengths = [math.hypot(*xyz) for spec in specs for xyz in (spec.parent_xyz, spec.child_xyz)]
-    return max(lengths + [1.0])
 
 
 def _side(spec, link):
@@ -288,12 +284,11 @@ class JointReadout:
     back from the link rotations (one sample on floats, N on (N,) lanes)."""
 
     def __init__(self, mechanism, solver):
-        from .kinematics import BASE
         kept = [(k, solver.joint_index[name]) for k, name in enumerate(mechanism.joints)
                 if name in solver.joint_index]
         self.kept_joints = [k for k, _ in kept]
         self.kept_coordinates = [c for _, c in kept]
-        link = {solver.base_link: BASE, **solver.link_index}
+        link = {solver.base_link: kin.BASE, **solver.link_index}
         self.chains = [(chain, [mechanism.joint_index[j] for j in chain.joints],
                         link[chain.parent], link[chain.child])
                        for chain in mechanism.spherical_chains]
@@ -303,7 +298,6 @@ class JointReadout:
     def __call__(self, coordinates, rates=None):
         """(positions, rates or None): (n_joints,) for coordinates (n,), (N, n_joints) for
         (N, n); ``rates`` the coordinates' rates, the same shape."""
-        from . import kinematics as kin
         q = np.asarray(coordinates, dtype=float)
         single = q.ndim == 1
         q = np.atleast_2d(q)
