@@ -81,15 +81,13 @@ def load_cost(path, kwargs, peer=False, cache=None):
 def background_builds_done(cache, limit=180.0):
     """Wait until the -O2 builds that a first load started in the background (native.py:
     large kernels load at -O0 first) have finished in ``cache``: a compiler left running
-    would share the 2 cores with every timing that follows."""
+    would share the 2 cores with every timing that follows. True if there was one."""
     deadline = time.time() + limit
+    waited = False
     while glob.glob(os.path.join(cache, '*.lock')) and time.time() < deadline:
+        waited = True
         time.sleep(0.5)
-
-
-def background_builds_pending():
-    """An -O2 build is running in the kernel cache this process uses."""
-    return bool(glob.glob(os.path.join(native.cache_directory(), '*.lock')))
+    return waited
 
 
 def check(name, mech, peer, kwargs, q, qd, qdd):
@@ -177,8 +175,7 @@ def main(argv=None):
         peer_path = os.path.join(REPO, 'config', TWINS.get(name, name))
         mech = cog_id_ros.Mechanism.from_params_file(path)
         solver = cog_id_ros.InverseDynamics(mech, **kwargs)
-        if background_builds_pending():    # a first load: time the -O2 kernels, loaded anew
-            background_builds_done(native.cache_directory())
+        if background_builds_done(native.cache_directory()):   # a first load: time the -O2
             mech = cog_id_ros.Mechanism.from_params_file(path)
             solver = cog_id_ros.InverseDynamics(mech, **kwargs)
         peer = Peer(peer_path)
