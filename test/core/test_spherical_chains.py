@@ -237,16 +237,17 @@ def test_a_mechanism_with_both_kinds_reads_back_its_hidden_coordinates_too(monke
 
 
 def _wrist_legs(pitch):
-    """Leg lengths of the 3-UPS wrist (test_closure_joints.wrist) with the plate pitched by
-    ``pitch`` about y."""
+    """Leg lengths of the 3-UPS wrist (test_closure_joints.wrist, its geometry read from
+    its parameters) with the plate pitched by ``pitch`` about y."""
+    p = wrist(False)
     c, s = math.cos(pitch), math.sin(pitch)
     rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    centre = np.array(p['joints.ball.parent_xyz'])
     out = []
     for i in range(3):
-        a = 2.0 * np.pi * i / 3.0
-        base = np.array([0.25 * np.cos(a), 0.25 * np.sin(a), 0.0])
-        top = np.array([0.15 * np.cos(a + 0.6), 0.15 * np.sin(a + 0.6), 0.0])
-        out.append(float(np.linalg.norm([0.0, 0.0, 0.3] + rot @ top - base)) - 0.4)
+        base, top = np.array(p[f'joints.u{i}.parent_xyz']), np.array(p[f'joints.s{i}.child_xyz'])
+        stroke = p[f'joints.p{i}.parent_xyz'][2] - p[f'joints.p{i}.child_xyz'][2]
+        out.append(float(np.linalg.norm(centre + rot @ top - base)) - stroke)
     return out
 
 
