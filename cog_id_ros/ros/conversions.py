@@ -25,6 +25,8 @@ REASONS = {
     'out_of_range': 'a finite value too large to compute with (the torques would overflow)',
     'stamp': 'the header stamp does not come after the previous accepted setpoint, or is '
              "more than max_stamp_lead ahead of the node's clock",
+    'stale': 'taken more than max_setpoint_age after it was published (the node was '
+             'stopped, or fell behind): too late to serve',
     'jump': 'an active joint moved farther than max_setpoint_step since the previous '
             'setpoint (after unwrapping revolute joints)',
     'limit': "an active joint's position outside its limits (joints.<name>.lower / upper, "
@@ -64,7 +66,7 @@ def rejection(exc, redundant=None):
     ``redundant`` is no longer needed (kept for callers that still pass it).
     """
     reason = getattr(exc, 'reason', None)
-    if reason not in REASONS or reason in ('empty', 'missing_joint', 'stamp', 'jump'):
+    if reason not in REASONS or reason in ('empty', 'missing_joint', 'stamp', 'stale', 'jump'):
         reason = 'solver'
     return Rejected(reason, str(exc))
 
@@ -353,7 +355,8 @@ def trajectory_process(conn, config):
 
     ``config``: ``mechanism`` (the mechanism's parameters), ``active_joints``, ``unwrap``,
     ``max_step``, ``effort_limits`` (or None), ``max_points``, ``backend``. Reads serialized
-    JointTrajectory messages from ``conn`` until EOF (the node closed its end, or ended)
+    JointTrajectory messages from ``conn`` until EOF (the node closed its end, or ended),
+    once it has said ('ready',) (its solver is built: the kernels loaded or compiled),
     and answers each with ('ok', serialized effort_trajectory, clipped, points),
     ('rejected', reason, text, points) or ('internal', text). Ignores SIGINT: Ctrl-C in a
     terminal reaches the whole process group, and the node ends this process itself.
@@ -366,6 +369,10 @@ def trajectory_process(conn, config):
     selector = JointSelector(config['active_joints'])
     options = {'unwrap': config['unwrap'], 'max_step': config['max_step'],
                'effort_limits': config['effort_limits'], 'max_points': config['max_points']}
+    try:
+        conn.send(('ready',))     # loaded: from here on each answer is bounded (the node)
+    except (EOFError, OSError):
+        return
     while True:
         try:
             raw = conn.recv_bytes()

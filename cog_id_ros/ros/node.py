@@ -48,6 +48,7 @@ The physics is in :mod:`cog_id_ros.core`, the acceleration estimator in
 :mod:`cog_id_ros.ros.setpoint_filter`, the message checks in :mod:`cog_id_ros.ros.conversions`.
 """
 import collections
+import contextlib
 import functools
 import gc
 import math
@@ -185,15 +186,26 @@ def _guarded(method):
 class CogIdNode(Node):
     """Inverse dynamics of the mechanism in its parameters, served over topics."""
 
-    def __init__(self, command_line=None, **kwargs):
+    def __init__(self, command_line=None, interruptible=contextlib.nullcontext, **kwargs):
         """``command_line``: the process's arguments (main() passes them), for the directory
-        a relative ``mechanism.urdf_file`` is relative to (:func:`urdf_base_dir`)."""
+        a relative ``mechanism.urdf_file`` is relative to (:func:`urdf_base_dir`).
+        ``interruptible``: a context manager around the parts of start-up that may take long
+        and build no rclpy object (loading the mechanism, compiling its kernels), in which
+        main() lets a stop signal raise (stop_signals.DeferredStop.interruptible)."""
         super().__init__(NODE_NAME, **kwargs)
+        try:
+            self._build(command_line, interruptible)
+        except BaseException:
+            self.destroy_node()     # no half-built node left to rclpy's clean-up
+            raise
+
+    def _build(self, command_line, interruptible):
         overrides = self._override_values()
         base_dir = urdf_base_dir(command_line, self.get_name()) \
             if 'mechanism.urdf_file' in overrides else None
-        self.mechanism = Mechanism.from_parameters(
-            self._declare_mechanism_parameters(overrides), base_dir=base_dir)
+        with interruptible():
+            self.mechanism = Mechanism.from_parameters(
+                self._declare_mechanism_parameters(overrides), base_dir=base_dir)
         mech = self.mechanism
         self.active_joints = list(mech.active_joints)
         n_act = len(self.active_joints)
@@ -222,10 +234,12 @@ class CogIdNode(Node):
             if math.isfinite(cfg['max_stamp_lead']) else math.inf
         self.max_stamp_rejections = cfg['max_stamp_rejections']
         self.max_trajectory_points = cfg['max_trajectory_points']
+        self.max_age_ns = cfg['max_setpoint_age'] * NANOSECONDS
 
         self.backend = cfg['backend']
-        self.solver = InverseDynamics(mech, backend=self.backend)   # the setpoint stream
-        self.report_solver = InverseDynamics(mech, backend=self.backend)   # for diagnostics
+        with interruptible():
+            self.solver = InverseDynamics(mech, backend=self.backend)   # the setpoint stream
+            self.report_solver = InverseDynamics(mech, backend=self.backend)   # diagnostics
         self.filter = SetpointFilter(n_act, cfg['estimator_window'], cfg['max_setpoint_interval'])
         self.selector = JointSelector(self.active_joints)
         self.outputs = EffortMessages(self.active_joints, mech.joints)
@@ -308,7 +322,7 @@ class CogIdNode(Node):
              'unwrap': self.unwrap, 'max_step': self.max_step.tolist(),
              'effort_limits': self.effort_limits.tolist() if self.limited else None,
              'max_points': self.max_trajectory_points, 'backend': self.backend},
-            self._trajectory_done)
+            self._trajectory_done, timeout=cfg['trajectory_timeout'])
         self.create_timer(cfg['diagnostics_period'], self.publish_diagnostics)
         if self.setpoint_timeout > 0.0:
             self.create_timer(min(self.setpoint_timeout / 4.0, 0.25), self.check_timeout)
@@ -326,16 +340,37 @@ class CogIdNode(Node):
             self.get_logger().warning(f'mechanism: {warning}')
         # last: declaring a parameter (rclpy declares the QoS overrides) runs these callbacks
         self.add_on_set_parameters_callback(self._refuse_parameter_changes)
+        self._built = True
 
     def start(self):
         """Start the setpoint thread and the trajectory worker (once the node is built)."""
         self.setpoint_loop.start()
         self.trajectory_worker.start()
+        self._threads_started = True
+
+    def stopped_threads(self):
+        """'<thread>: <why>' of every thread of the node that ended although the node did
+        not stop it (a bug: none may end silently; /diagnostics says ERROR, and the process
+        exits with status 1)."""
+        if not getattr(self, '_threads_started', False):
+            return []
+        out = []
+        for name, thread in (('setpoint thread', self.setpoint_loop),
+                             ('trajectory worker', self.trajectory_worker)):
+            if not thread.running:
+                failure = thread.failure
+                out.append(f'{name}: ' + (f'{type(failure).__name__}: {failure}'
+                                          if failure is not None else 'ended'))
+        return out
 
     def stop(self):
-        """Stop both (before the node is destroyed)."""
+        """Stop both (before the node is destroyed); returns stopped_threads() as it was
+        before (what ended by itself)."""
+        stopped = self.stopped_threads()
+        self._threads_started = False
         self.setpoint_loop.stop()
         self.trajectory_worker.stop()
+        return stopped
 
     # --- parameters --------------------------------------------------------------------------
 
@@ -436,6 +471,24 @@ class CogIdNode(Node):
             reason=f'{names}: {NODE_NAME} reads its parameters once at start-up; they are '
                    'read-only (restart the node with the new value)')
 
+    # rclpy checks a descriptor's read_only before any callback and refuses with its own
+    # words ("Trying to set a read-only parameter"); a change of a declared parameter at
+    # runtime gets the node's reason instead (the descriptors still say read-only)
+    def set_parameters(self, parameter_list):
+        if self._refuses(parameter_list):
+            return [self._refuse_parameter_changes([p]) for p in parameter_list]
+        return super().set_parameters(parameter_list)
+
+    def set_parameters_atomically(self, parameter_list):
+        if self._refuses(parameter_list):
+            return self._refuse_parameter_changes(parameter_list)
+        return super().set_parameters_atomically(parameter_list)
+
+    def _refuses(self, parameter_list):
+        """Once the node is built, a change of any parameter it declared is refused."""
+        return getattr(self, '_built', False) and \
+            any(self.has_parameter(p.name) for p in parameter_list)
+
     # --- setpoints ---------------------------------------------------------------------------
 
     def serve_setpoint(self, msg, info=None):
@@ -449,6 +502,8 @@ class CogIdNode(Node):
         if info is not None:
             self._count_lost(info.get('publication_sequence_number'))
         try:
+            if info is not None and self.max_age_ns:
+                self._check_age(info.get('source_timestamp'))
             received, v = setpoint_arrays(msg, self.selector)
             stamp = stamp_to_ns(msg.header.stamp)
             unstamped = not stamp
@@ -516,6 +571,20 @@ class CogIdNode(Node):
                                         f'node goes on): {type(exc).__name__}: {exc}',
                                         error=True)
 
+    def _check_age(self, published):
+        """Rejected ('stale') when the setpoint was published more than max_setpoint_age
+        ago (``published``: DDS's source timestamp, ns of the publisher's system clock,
+        which time.time_ns reads on this machine): after the node was stopped and continued,
+        or while it is behind, a command for a past setpoint would reach the motors late."""
+        if not published:
+            return
+        age = time.time_ns() - published
+        if age > self.max_age_ns:
+            raise Rejected('stale', f'published {age / NANOSECONDS:.3g} s ago, more than '
+                           f'max_setpoint_age ({self.max_age_ns / NANOSECONDS:g} s): the node '
+                           'was stopped or fell behind (or the clocks of the two machines '
+                           'disagree)')
+
     def _unstamped(self):
         """A setpoint stamped 0 was served at its receipt time: counted, warned about (the
         time between receipts jitters against the motion, and its second difference is in
@@ -526,8 +595,8 @@ class CogIdNode(Node):
             'unstamped', 'setpoint stamped 0: served at its receipt time, so the jitter of '
             'receipt times against the motion goes into the estimated accelerations (at 1 kHz, '
             'torques can be many times too large); stamp each setpoint with the time its '
-            'positions are meant for (header.stamp), or send velocities and accelerations '
-            'through effort_trajectory')
+            'positions are meant for (header.stamp), or send whole trajectories with their '
+            'velocities and accelerations to joint_trajectory')
 
     def _ros_now_ns(self):
         """The node's clock (ROS time: /clock with use_sim_time) in integer ns."""
@@ -625,16 +694,25 @@ class CogIdNode(Node):
             self._warned[key] = (last, suppressed + 1)
             return
         more = f' ({suppressed} more like it since the last warning)' if suppressed else ''
-        (self.get_logger().error if error else self.get_logger().warning)(text + more)
         self._warned[key] = (now, 0)
+        # Two call sites, one per severity: rclpy's logger remembers the severity of each call
+        # site and raises ValueError when one site logs at another (an error after a warning
+        # from one line killed the thread that logged it)
+        if error:
+            self.get_logger().error(text + more)
+        else:
+            self.get_logger().warning(text + more)
 
     def internal_error(self, where, exc):
         """An exception in one of the node's callbacks: counted, logged with its type."""
         with self.lock:
             self.counts['internal_errors'] += 1
             self._period_problems += 1
-            self.warn_throttled('internal.' + where, f'{where} failed (the node goes on): '
-                                f'{type(exc).__name__}: {exc}', error=True)
+            try:
+                self.warn_throttled('internal.' + where, f'{where} failed (the node goes on): '
+                                    f'{type(exc).__name__}: {exc}', error=True)
+            except Exception:   # noqa: BLE001 (counted: a failing log must not raise again)
+                pass
 
     # --- trajectories ------------------------------------------------------------------------
 
@@ -753,7 +831,12 @@ class CogIdNode(Node):
         status.name = f'{self.get_fully_qualified_name()}: inverse dynamics'
         status.hardware_id = self.mechanism.name
         n_rejected = sum(self.rejected.values())
-        if self.last_was_rejected:
+        stopped = self.stopped_threads()
+        if stopped:
+            status.level = DiagnosticStatus.ERROR
+            status.message = (f"stopped serving ({'; '.join(stopped)}): a bug, please report "
+                              'it; restart the node')
+        elif self.last_was_rejected:
             status.level = DiagnosticStatus.ERROR
             status.message = f'last setpoint rejected ({self.last_rejection})'
         elif self._period_problems:
@@ -832,28 +915,53 @@ class TrajectoryWorker:
     Python and C that hold the GIL (a 100,000-point one: ~7 s on the reference VM); done in
     the node's process it stalled the setpoint thread and the timers. Here the node only
     passes the serialized message (bytes) through a pipe to a process started with
-    ``spawn`` from the mechanism's parameters (:func:`ros_conversions.trajectory_process`),
+    ``spawn`` from the mechanism's parameters (:func:`conversions.trajectory_process`),
     and publishes the serialized answer it gets back: the node's threads are never held up
     by more than copying bytes. One trajectory is solved at a time and at most one waits
-    (:meth:`submit` returns the one a newer one replaced). If the process dies (killed,
-    out of memory), the trajectory in progress is answered with ('internal', text) and a
-    new process is started for the next one.
+    (:meth:`submit` returns the one a newer one replaced).
+
+    Nothing here waits without a bound: the process has ``STARTUP_BOUND`` s to say it is
+    ready (its kernels loaded or compiled) and :meth:`answer_bound` s to answer a
+    trajectory; a process that dies (killed, out of memory) or does not answer in time
+    (stopped, stuck) is killed, the trajectory in progress is answered with ('internal',
+    text) and a new process is started for the next one. :meth:`stop` kills a process
+    that does not end within its timeout (SIGKILL: a stopped process ignores SIGTERM
+    until it is continued, and multiprocessing's exit handler would wait for it).
     """
 
-    def __init__(self, config, on_done):
+    #: s a new trajectory process may take to load the mechanism and its kernels (a cold
+    #: compile of a large mechanism, on a loaded machine)
+    STARTUP_BOUND = 300.0
+    #: s per point added to ``timeout`` for a trajectory's answer: 10-15x the measured cost
+    #: (a 100,000-point trajectory takes 4-8 s on the reference VM)
+    SECONDS_PER_POINT = 1e-3
+
+    def __init__(self, config, on_done, timeout=10.0):
         self.config = config
         self.on_done = on_done
+        self.timeout = timeout
         self._cond = threading.Condition()
         self._next = None        # taken next, never replaced (it came while nothing was solved)
         self._pending = None     # the one that waits; a newer one replaces it
         self.busy = False
         self._stopping = False
         self._process = self._conn = None
+        self._ready = False
+        #: the exception that ended the worker thread, if one did (reported by the node)
+        self.failure = None
         self._thread = threading.Thread(target=self._run, name='trajectory worker', daemon=True)
 
     def start(self):
         self._start_process()
         self._thread.start()
+
+    @property
+    def running(self):
+        return self._thread.is_alive()
+
+    def answer_bound(self, points):
+        """s the process has to answer a trajectory of ``points`` points (None: unknown)."""
+        return self.timeout + self.SECONDS_PER_POINT * (points or 0)
 
     def submit(self, raw):
         """Queue ``raw`` (a serialized JointTrajectory); returns the one it replaced, or None.
@@ -871,7 +979,7 @@ class TrajectoryWorker:
 
     def stop(self, timeout=5.0):
         """End the process (at once if it is solving: nobody waits for its answer) and
-        the thread."""
+        the thread; never waits longer than about ``timeout`` for each."""
         with self._cond:
             self._stopping = True
             self._next = self._pending = None
@@ -885,18 +993,18 @@ class TrajectoryWorker:
         parent, child = context.Pipe()
         process = context.Process(target=trajectory_process, args=(child, self.config),
                                   name='cog_id_node trajectories', daemon=True)
-        # Started with SIGINT ignored, so Python keeps ignoring it from the first line on:
-        # Ctrl-C in a terminal reaches the whole process group, and a KeyboardInterrupt
-        # while the process imports would print a traceback. The node ends it itself.
-        main_thread = threading.current_thread() is threading.main_thread()
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+        # Started with SIGINT blocked, which the new process inherits, so that Ctrl-C in a
+        # terminal (it reaches the whole process group) never interrupts it, not even while
+        # it imports; the node ends it itself. Blocked in this thread only, never ignored
+        # process-wide: a SIGINT that arrives meanwhile is delivered to another thread of the
+        # node (or on unblocking), not lost (ignoring it here lost a Ctrl-C at start-up).
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             process.start()
         finally:
-            if main_thread:
-                signal.signal(signal.SIGINT, previous)
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         child.close()
-        self._process, self._conn = process, parent
+        self._process, self._conn, self._ready = process, parent, False
 
     def _end_process(self, timeout=5.0):
         process, conn = self._process, self._conn
@@ -906,10 +1014,17 @@ class TrajectoryWorker:
         if process is not None:
             process.join(timeout)
             if process.is_alive():
-                process.terminate()
+                process.kill()      # SIGKILL: ends a stopped process too
                 process.join(timeout)
 
     def _run(self):
+        try:
+            self._serve()
+        except BaseException as exc:   # noqa: BLE001 (recorded: the node reports it)
+            self.failure = exc
+            raise
+
+    def _serve(self):
         while True:
             with self._cond:
                 while self._next is None and self._pending is None and not self._stopping:
@@ -931,21 +1046,33 @@ class TrajectoryWorker:
             if not self._stopping:
                 self.on_done(result)
 
+    def _receive(self, bound, what):
+        """The process's next message within ``bound`` s; TimeoutError naming ``what``."""
+        if not self._conn.poll(bound):
+            raise TimeoutError(f'the trajectory process did not {what} within {bound:.3g} s '
+                               '(stopped or stuck)')
+        return self._conn.recv()
+
     def _solve(self, raw):
         if self._process is None or not self._process.is_alive():
             self._end_process(1.0)
             self._start_process()
         try:
+            if not self._ready:
+                self._receive(self.STARTUP_BOUND, 'load the mechanism')
+                self._ready = True
             self._conn.send_bytes(raw)
-            return self._conn.recv()
-        except (EOFError, OSError) as exc:
+            return self._receive(self.answer_bound(trajectory_point_count(raw)),
+                                 'answer the trajectory')
+        except (EOFError, OSError, TimeoutError) as exc:
             if self._stopping:
                 return ('internal', 'stopping')
             code = self._process.exitcode if self._process is not None else None
+            why = str(exc) if isinstance(exc, TimeoutError) else \
+                f'the trajectory process ended ({type(exc).__name__}, exit code {code})'
             self._end_process(1.0)
             self._start_process()
-            return ('internal', f'the trajectory process ended ({type(exc).__name__}, exit code '
-                                f'{code}); a new one is started for the next trajectory')
+            return ('internal', f'{why}; a new one is started for the next trajectory')
 
 
 def main(args: list[str] | None = None) -> int:
@@ -953,10 +1080,12 @@ def main(args: list[str] | None = None) -> int:
 
     ``-h``/``--help`` (before ``--ros-args``): the usage, exit status 0. A parameter that
     cannot be honoured, or a params file rcl cannot parse: exit status 2 and one line
-    naming it. A stop signal that arrives while the node is being built is noted and
-    acted on once it is built (see :mod:`cog_id_ros.stop_signals`), so it stops the node
-    cleanly too. No exception of a callback ends the node (they are counted in
-    diagnostics as ``internal_errors``).
+    naming it. A stop signal that arrives while the node is being built ends start-up at
+    once while the mechanism loads and its kernels compile, and is noted and acted on
+    once the rclpy objects are built otherwise (:mod:`cog_id_ros.ros.stop_signals`): it
+    stops the node cleanly too (exit status 0). No exception of a callback ends the node
+    (they are counted in diagnostics as ``internal_errors``); a thread of the node that
+    ended anyway makes the exit status 1.
     """
     argv = sys.argv[1:] if args is None else list(args[1:])
     own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
@@ -977,8 +1106,9 @@ def main(args: list[str] | None = None) -> int:
     held.replay()
     sys.setswitchinterval(SWITCH_INTERVAL)
     node = None
+    stopped = []
     try:
-        node = CogIdNode(command_line=argv)
+        node = CogIdNode(command_line=argv, interruptible=stop.interruptible)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         # Start-up left tens of thousands of long-lived objects (rclpy, numpy, the traced
@@ -993,8 +1123,9 @@ def main(args: list[str] | None = None) -> int:
             rclpy.exceptions.InvalidParameterValueException) as exc:
         print(f'{NODE_NAME}: cannot start: {_one_line(exc)}', file=sys.stderr)
         return 2
-    except ExternalShutdownException:
-        pass   # Ctrl-C or SIGTERM: rclpy's signal handler has shut the context down
+    except (ExternalShutdownException, stop_signals.StopRequested):
+        pass   # Ctrl-C or SIGTERM: rclpy's signal handler has shut the context down, or
+        # start-up was interrupted while it loaded the mechanism or compiled its kernels
     except Exception as exc:   # noqa: BLE001
         if rclpy.ok():
             if node is None:   # start-up: an error rclpy raised for something we did not check
@@ -1006,9 +1137,13 @@ def main(args: list[str] | None = None) -> int:
         # then fails on the dead context (an RCLError): a clean stop too
     finally:
         if node is not None:
-            node.stop()
+            stopped = node.stop()
             node.destroy_node()
         rclpy.try_shutdown()
+    if stopped:
+        print(f"{NODE_NAME}: stopped serving before the end: {'; '.join(stopped)}",
+              file=sys.stderr)
+        return 1
     return 0
 
 

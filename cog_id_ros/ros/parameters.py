@@ -267,6 +267,20 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'header alone, before it costs anything. 100,000 points take about 4-8 s '
                     'to solve on the reference VM'),
     NodeParameter(
+        'trajectory_timeout', 'double', 10.0, 'number', unit='s', low=0.1, high=3600.0,
+        description='s the trajectory process may take to answer a `joint_trajectory`, plus '
+                    '1 ms per point (10-15x what solving takes); a process that does not '
+                    'answer in time (stopped, stuck) is killed and replaced, and the '
+                    'trajectory is rejected (`solver`) with the reason'),
+    NodeParameter(
+        'max_setpoint_age', 'double', 0.5, 'number', unit='s', low=1e-3, high=3600.0,
+        special=(0.0, 'no check'),
+        description='s: a setpoint taken more than this after it was published (by the '
+                    "publisher's clock, from DDS's source timestamp: e.g. after the node was "
+                    'stopped and continued, or fell behind) is rejected (`stale`), never '
+                    'served late; across machines their clocks must agree to well within it '
+                    '(0: no check)'),
+    NodeParameter(
         'joint_states_decimation', 'int', 10, 'integer', low=0, high=1_000_000,
         description='`joint_states` carries the closed pose of every Nth served setpoint '
                     '(the first one of the node included); the default 10 is 100 Hz at a 1 kHz '

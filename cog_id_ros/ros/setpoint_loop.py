@@ -74,6 +74,9 @@ class SetpointLoop:
         self._wake = GuardCondition(None, None, context=node.context)
         self._stopping = False
         self._thread = None
+        #: the exception that ended the thread, if one did (the node reports it: a loop that
+        #: dies must never do so silently)
+        self.failure = None
 
     def start(self):
         """Start serving. The wait set is built here, in the caller's thread (an error
@@ -113,6 +116,14 @@ class SetpointLoop:
         sub = self.subscription
         try:
             self._loop(wait_set, sub.handle, sub.msg_type, sub.raw, self.node.context)
+        except BaseException as exc:   # noqa: BLE001 (recorded, then the thread ends)
+            self.failure = exc
+            try:
+                self.node.get_logger().error(
+                    f'{sub.topic_name}: the thread serving it stopped: '
+                    f'{type(exc).__name__}: {exc}')
+            except Exception:   # noqa: BLE001 (the node reports self.failure all the same)
+                pass
         finally:
             wait_set.destroy_when_not_in_use()
             in_use.close()
@@ -153,13 +164,20 @@ class SetpointLoop:
                     self.callback(taken[0])
             except Exception as exc:   # noqa: BLE001 (the loop must outlive a bad message)
                 if self.node.context.ok():
-                    self.on_error(exc)
+                    self._report(exc)
 
     def _take_failed(self, exc):
         """Taking a message failed: reported like a callback error; the loop waits again."""
         with self._held:
+            self._report(exc)
+
+    def _report(self, exc):
+        """``on_error(exc)``; if that fails too, the node's log (the loop goes on)."""
+        try:
+            self.on_error(exc)
+        except Exception:   # noqa: BLE001 (a failing error handler must not end the loop)
             try:
-                self.on_error(exc)
+                self._log_error(exc)
             except Exception:   # noqa: BLE001
                 pass
 

@@ -23,12 +23,31 @@ rclpy's handlers and says whether a stop was asked for meanwhile::
 The node keeps the noting handlers after the hand-over (rclpy's handler calls them too):
 Ctrl-C then stops it only through rclpy's context shutdown, never by a KeyboardInterrupt
 raised at an arbitrary line of the clean-up.
+
+Parts of start-up that build no rclpy object but may take long (loading the mechanism,
+compiling its kernels: a hung compiler may take minutes) run inside
+:meth:`DeferredStop.interruptible`: there a stop signal, or one noted before, raises
+:class:`StopRequested` at once, and the code unwinds (a compiler it started is killed on
+the way, core/native.py)::
+
+    with stop.interruptible():
+        mechanism = Mechanism.from_parameters(...)    # StopRequested on Ctrl-C
 """
+import contextlib
 import signal
 
 from rclpy.signals import SignalHandlerOptions, install_signal_handlers
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class StopRequested(BaseException):
+    """A stop signal during an interruptible part of start-up (a BaseException, like
+    KeyboardInterrupt, so that no ``except Exception`` on the way swallows it)."""
+
+    def __init__(self, signum):
+        self.signum = signum
+        super().__init__(f'stopped by {signal.Signals(signum).name} during start-up')
 
 
 class DeferredStop:
@@ -39,11 +58,27 @@ class DeferredStop:
 
     def __init__(self):
         self.received = None        # the first stop signal noted, or None
+        self._interruptible = False
         self._previous = {signum: signal.signal(signum, self._note) for signum in STOP_SIGNALS}
 
     def _note(self, signum, frame):
         if self.received is None:
             self.received = signum
+        if self._interruptible:
+            self._interruptible = False     # raised once
+            raise StopRequested(signum)
+
+    @contextlib.contextmanager
+    def interruptible(self):
+        """Within the block a stop signal raises StopRequested (in the main thread, where
+        Python runs signal handlers); one noted before it raises on entry."""
+        if self.received is not None:
+            raise StopRequested(self.received)
+        self._interruptible = True
+        try:
+            yield
+        finally:
+            self._interruptible = False
 
     def hand_over(self, restore_python_handlers=False):
         """Install rclpy's signal handlers; return the signal noted before, or None.

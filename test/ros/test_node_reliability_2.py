@@ -1,0 +1,249 @@
+"""cog_id_node under what a newcomer and an adversary hit (the second reliability issue:
+"a node that stops serving, a cache that trusts anyone, demos that hide losses").
+
+Each test names its item ("Reliability 2, item N") and fails on the code before the fix.
+Nodes run as subprocesses of this checkout (``python -m cog_id_ros.node``) in namespaces
+of their own; a probe node in this process talks to them over DDS. Waits are generous
+upper bounds, never reached when things work.
+"""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+from conftest import wait_until  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
+from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
+from rcl_interfaces.srv import SetParameters  # noqa: E402
+from test_node import Probe, call, make_trajectory, values  # noqa: E402
+from test_node_reliability import CONFIG_A, hold, long_trajectory, stream, wait_values  # noqa: E402
+
+NS = 1_000_000_000
+
+
+def start(ros_process, namespace, *extra, env=None):
+    proc = ros_process([sys.executable, '-m', 'cog_id_ros.node', '--ros-args', '--params-file',
+                        CONFIG_A, '-r', f'__ns:={namespace}', '-p', 'diagnostics_period:=0.2',
+                        *extra], env=env)
+    assert proc.wait_for_output("mechanism '", timeout=60), proc.output
+    return proc
+
+
+@pytest.fixture
+def probe_for(rclpy_context):
+    made = []
+
+    def make(namespace):
+        probe = Probe(rclpy_context, namespace, f'probe2_{namespace.strip("/")}')
+        made.append(probe)
+        assert probe.connected()
+        assert wait_until(lambda: probe.trajectories.get_subscription_count() > 0)
+        return probe
+    yield make
+    for probe in made:
+        probe.close()
+
+
+def trajectory_processes(pid):
+    """Process ids of the trajectory processes of node ``pid`` (multiprocessing's spawned
+    children; not its resource tracker)."""
+    out = subprocess.run(['pgrep', '-P', str(pid)], capture_output=True, text=True).stdout
+    found = []
+    for child in map(int, out.split()):
+        try:
+            with open(f'/proc/{child}/cmdline', 'rb') as f:
+                if b'spawn_main' in f.read():
+                    found.append(child)
+        except OSError:
+            pass
+    return found
+
+
+def in_node(rclpy_context, namespace, **params):
+    """A CogIdNode in this process (not started: no threads), for unit-level checks."""
+    from mechanisms import from_yaml
+    from rclpy.parameter import Parameter
+
+    from cog_id_ros.ros.node import CogIdNode
+
+    given = dict(from_yaml(CONFIG_A), **params)
+    overrides = [Parameter(name, value=value) for name, value in given.items()]
+    return CogIdNode(context=rclpy_context, parameter_overrides=overrides, namespace=namespace)
+
+
+# --- item 1: no thread of the node dies, and none dies silently --------------------------------
+
+def test_an_error_then_a_warning_log_from_one_call_site(rclpy_context):
+    """Reliability 2, item 1: warn_throttled logged ERROR and WARN from one line; rclpy then
+    raised ValueError ("Logger severity cannot be changed between calls") out of the
+    second, which killed the thread that logged it."""
+    node = in_node(rclpy_context, '/severity')
+    try:
+        node.internal_error('trajectory', RuntimeError('the process was killed'))
+        node.reject('non_finite', 'a NaN')                  # a warning after an error
+        node.internal_error('setpoint', RuntimeError('again'))   # and an error after it
+        assert node.counts['internal_errors'] == 2
+        assert node.rejected['non_finite'] == 1
+    finally:
+        node.destroy_node()
+
+
+def test_a_killed_solve_then_a_rejected_setpoint_leaves_the_stream_served(ros_process,
+                                                                          probe_for):
+    """Reliability 2, item 1: the trajectory process killed while it solved (an internal
+    error) followed by one rejected setpoint killed the setpoint thread: 0 of the next 200
+    valid setpoints were answered, and the event was counted twice in internal_errors."""
+    proc = start(ros_process, '/killsolve', '-p', 'setpoint_timeout:=0.0')
+    probe = probe_for('/killsolve')
+    probe.trajectories.publish(long_trajectory(40_000))
+    assert wait_values(probe, lambda kv: kv['trajectory_in_progress'] == 'true'), proc.output
+    for pid in trajectory_processes(proc.proc.pid):
+        os.kill(pid, signal.SIGKILL)
+    kv = wait_values(probe, lambda kv: kv['trajectories_rejected.solver'] == '1')
+    assert kv['internal_errors'] == '1', kv
+    base = time.time_ns()
+    probe.send(base, ['joint3'], [float('nan')])              # a warning after the error
+    stamps = stream(probe, [1.4 + 1e-4 * k for k in range(200)], base + NS // 100, pause=0.002)
+    assert wait_until(lambda: all(probe.effort_at(s) is not None for s in stamps), 30), \
+        f'{sum(probe.effort_at(s) is not None for s in stamps)} of 200 answered\n{proc.output}'
+    kv = wait_values(probe, lambda kv: kv['setpoints_accepted'] == '200')
+    assert kv['internal_errors'] == '1' and kv['rejected.non_finite'] == '1', kv
+    assert proc.stop() == 0, proc.output
+
+
+def test_a_thread_that_died_turns_the_status_to_error(rclpy_context):
+    """Reliability 2, item 1: a loop of the node that ended left it up, OK and exiting 0;
+    now /diagnostics says ERROR naming the thread, and stop() reports it (main() exits 1)."""
+    node = in_node(rclpy_context, '/deadloop')
+    try:
+        def broken(*args):
+            raise ValueError('Logger severity cannot be changed between calls')
+        node.setpoint_loop._loop = broken
+        node.start()
+        assert wait_until(lambda: not node.setpoint_loop.running, 10)
+        status = node.diagnostic_status(0.0, 1.0)
+        assert status.level == DiagnosticStatus.ERROR
+        assert 'setpoint thread: ValueError' in status.message
+        assert node.stop() == ['setpoint thread: ValueError: Logger severity cannot be '
+                               'changed between calls']
+    finally:
+        node.destroy_node()
+
+
+# --- item 2: a stopped trajectory process is not waited for for ever ---------------------------
+
+def test_a_stopped_trajectory_process_is_killed_and_replaced(ros_process, probe_for):
+    """Reliability 2, item 2: a trajectory process stopped with SIGSTOP was waited for for
+    ever (trajectory_in_progress stayed true, later trajectories were refused as busy) and
+    SIGINT then hung the node in multiprocessing's exit handler."""
+    proc = start(ros_process, '/sigstop', '-p', 'trajectory_timeout:=1.0')
+    probe = probe_for('/sigstop')
+    q = np.full((6, 1), 1.4)
+    probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
+    assert wait_until(lambda: probe.effort_trajectories, timeout=90), proc.output  # ready
+    stopped = trajectory_processes(proc.proc.pid)
+    assert stopped, 'no trajectory process'
+    for pid in stopped:
+        os.kill(pid, signal.SIGSTOP)
+    probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
+    kv = wait_values(probe, lambda kv: kv['trajectories_rejected.solver'] == '1', timeout=30)
+    assert kv['trajectory_in_progress'] == 'false', kv
+    assert 'did not answer the trajectory within' in proc.output, proc.output
+    assert wait_until(lambda: all(not os.path.exists(f'/proc/{pid}') or
+                                  open(f'/proc/{pid}/stat').read().split()[2] == 'Z'
+                                  for pid in stopped), 10), 'the stopped process lives on'
+    probe.trajectories.publish(make_trajectory(['joint3'], q[:3], q[:3] * 0, q[:3] * 0))
+    assert wait_until(lambda: len(probe.effort_trajectories) == 2, timeout=90), proc.output
+    # and a node whose trajectory process is stopped ends on SIGINT, without waiting for it
+    for pid in trajectory_processes(proc.proc.pid):
+        os.kill(pid, signal.SIGSTOP)
+    began = time.monotonic()
+    assert proc.stop(timeout=20) == 0, proc.output
+    assert time.monotonic() - began < 10
+
+
+# --- item 3: start-up honours SIGINT at once, even while a compiler hangs -----------------------
+
+def test_sigint_during_a_hung_compile_stops_the_node_at_once(ros_process, tmp_path, ros_env):
+    """Reliability 2, item 3: with a C compiler that never returns, start-up took 2 x 120 s,
+    SIGINT was honoured only after that, and compilers were left running."""
+    pids = tmp_path / 'compiler.pids'
+    hung = tmp_path / 'hung-cc'
+    hung.write_text(f'#!/bin/sh\necho $$ >> {pids}\nexec sleep 1000\n')
+    hung.chmod(0o755)
+    env = dict(ros_env, CC=str(hung), COG_ID_ROS_CACHE=str(tmp_path / 'cache'))
+    proc = ros_process([sys.executable, '-m', 'cog_id_ros.node', '--ros-args', '--params-file',
+                        CONFIG_A, '-r', '__ns:=/hungcc'], env=env)
+    assert wait_until(pids.exists, 60), proc.output      # the compiler runs
+    began = time.monotonic()
+    assert proc.stop(timeout=30) == 0, proc.output
+    assert time.monotonic() - began < 5, f'{time.monotonic() - began:.1f} s to stop'
+    assert 'Traceback' not in proc.output, proc.output
+    for pid in map(int, pids.read_text().split()):
+        assert wait_until(lambda: not os.path.exists(f'/proc/{pid}') or
+                          open(f'/proc/{pid}/stat').read().split()[2] == 'Z', 5), \
+            f'compiler {pid} left running'
+
+
+# --- item 4: setpoints have a maximum age ------------------------------------------------------
+
+def test_setpoints_older_than_max_setpoint_age_are_dropped(ros_process, probe_for):
+    """Reliability 2, item 4: after SIGSTOP/SIGCONT of the node, setpoints up to 1.6 s old
+    were still served; now those older than max_setpoint_age are rejected (stale) and
+    counted, and the stream goes on with fresh ones."""
+    proc = start(ros_process, '/stale', '-p', 'setpoint_timeout:=0.0',
+                 '-p', 'max_setpoint_age:=0.3')
+    probe = probe_for('/stale')
+    base = time.time_ns()
+    probe.send(base, ['joint3'], [1.4])
+    probe.wait_effort(base)
+    os.kill(proc.proc.pid, signal.SIGSTOP)
+    try:
+        old = stream(probe, [1.4] * 5, base + NS // 100, step_ns=NS // 100)
+        time.sleep(1.0)
+    finally:
+        os.kill(proc.proc.pid, signal.SIGCONT)
+    kv = wait_values(probe, lambda kv: kv['rejected.stale'] == '5')
+    assert kv['rejected.stale'] == '5', (kv, proc.output)
+    assert all(probe.effort_at(s) is None for s in old)
+    fresh = time.time_ns()
+    probe.send(fresh, ['joint3'], [1.4])
+    assert probe.wait_effort(fresh).effort[0] == pytest.approx(hold(1.4), abs=1e-9)
+    assert 'max_setpoint_age' in proc.output
+
+
+# --- item 11, 12: messages that say what to do --------------------------------------------------
+
+def test_the_unstamped_warning_names_the_input_topic(ros_process, probe_for):
+    """Reliability 2, item 11: the warning for setpoints stamped 0 told users to send
+    velocities and accelerations "through effort_trajectory", an output."""
+    proc = start(ros_process, '/unstamped', '-p', 'setpoint_timeout:=0.0')
+    probe = probe_for('/unstamped')
+    probe.send(0, ['joint3'], [1.4])
+    assert proc.wait_for_output('setpoint stamped 0'), proc.output
+    line = next(x for x in proc.output.splitlines() if 'setpoint stamped 0' in x)
+    assert 'joint_trajectory' in line and 'effort_trajectory' not in line, line
+
+
+def test_a_runtime_parameter_change_is_refused_with_the_nodes_reason(ros_process, probe_for):
+    """Reliability 2, item 12: changes were refused with rclpy's "Trying to set a read-only
+    parameter", not the reason docs/node.md gives (read once at start-up: restart)."""
+    start(ros_process, '/setparam')
+    probe = probe_for('/setparam')
+    request = SetParameters.Request(parameters=[ParameterMsg(
+        name='setpoint_timeout',
+        value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=2.0))])
+    result = call(probe.node, SetParameters, '/setparam/cog_id_node/set_parameters', request)
+    assert not result.results[0].successful
+    reason = result.results[0].reason
+    assert 'setpoint_timeout' in reason and 'once at start-up' in reason, reason
+    assert 'restart the node' in reason, reason
+    kv = values(probe.status_after(time.monotonic()))
+    assert kv['mechanism'] == 'paper_four_bar_a'
