@@ -6,8 +6,9 @@ apply first and the node's own entry overrides them. Nested mappings become dott
 (``links.link1.mass``), exactly the names rclpy gives the node, so the dict this returns
 feeds ``Mechanism.from_parameters`` (which is what ``Mechanism.from_params_file`` does).
 
-The file is read as strictly as rcl reads it (floats may be written without a dot; a key
-written twice is an error here, where rcl lets the last one win) and defensively: only
+The file is read as strictly as rcl reads it (numbers as rcl reads them: floats may be
+written without a dot, and 1_0 or 1:30 are text, not numbers; a key written twice is an
+error here, where rcl lets the last one win) and defensively: only
 regular files of at most ``MAX_FILE_CHARS``, no FIFOs, no deeply nested flow collections,
 no recursive aliases. An array rcl's parser refuses makes the file an error here too,
 naming the parameter (:func:`rcl_value_problem`: an array that mixes integers and doubles,
@@ -193,7 +194,8 @@ _SafeBase = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)   # libyaml's parser w
 
 class RclLoader(_SafeBase):
     """YAML's safe loader (libyaml's parser where available: 50x faster) reading numbers as
-    rcl does: floats may be written without a dot (``1e9``, ``-1e-4``)."""
+    rcl does: floats may be written without a dot (``1e9``, ``-1e-4``) or a leading digit
+    (``-.5``), and ``1_0``, ``1:30`` and ``0b1`` are strings (YAML 1.1 reads 10, 90, 1)."""
 
 
 class ParamsLoader(RclLoader):
@@ -213,8 +215,19 @@ class ParamsLoader(RclLoader):
         return super().construct_mapping(node, deep)
 
 
+# Numbers as rcl reads them (rcl_yaml_param_parser, get_value: strtoll with base 0, then
+# strtod, each consuming the whole text, else a string). YAML 1.1's resolvers read digits
+# with '_' between them (1_0 as 10), base 60 (1:30 as 90) and binary (0b101 as 5), which rcl
+# reads as the strings '1_0', '1:30' and '0b101' (checked with rcl, Jazzy): left out, so the
+# API refuses them as the node does ("must be a number"). They do not read what strtod does
+# and rcl takes as a double: -.5, .5e3, 1e9 (no dot), 09: added.
+_INT, _FLOAT = 'tag:yaml.org,2002:int', 'tag:yaml.org,2002:float'
 RclLoader.yaml_implicit_resolvers = {
-    first: list(resolvers) for first, resolvers in _SafeBase.yaml_implicit_resolvers.items()}
+    first: [(tag, regexp) for tag, regexp in resolvers if tag not in (_INT, _FLOAT)]
+    for first, resolvers in _SafeBase.yaml_implicit_resolvers.items()}
+RclLoader.add_implicit_resolver(       # first: a text both match (12) is an integer, as in rcl
+    _INT, re.compile(r'^[-+]?(?:0[0-7]*|[1-9][0-9]*|0x[0-9a-fA-F]+)$'), list('-+0123456789'))
 RclLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float', re.compile(r'^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
-    list('-+0123456789'))
+    _FLOAT, re.compile(r'^(?:[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?'
+                       r'|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$'),
+    list('-+0123456789.'))

@@ -6,12 +6,14 @@ Every load here runs with warnings turned into errors: a value out of bounds mus
 at the URDF element it was written in before any arithmetic on it, never after a numpy
 RuntimeWarning.
 """
+import os
 import warnings
 
 import pytest
-from test_urdf_input import four_bar_urdf, four_bar_urdf_params, inertial
+from test_urdf_input import CONFIG, four_bar_urdf, four_bar_urdf_params, inertial
 
 from cog_id_ros import Mechanism, MechanismConfigError
+from cog_id_ros.params_file import load_params_file, read_document
 from cog_id_ros.urdf_input import native_parameters
 
 
@@ -213,3 +215,27 @@ def test_loop_closure_offsets_on_a_welded_link_are_bounded_as_written():
         assert err.parameter == f'loop_closures.closing_joint.{key}'
         assert str(err).endswith(f'entries must lie within +-1e+06 {unit}, got {value!r} at '
                                  f'index 2')
+
+
+def test_numbers_in_a_parameter_file_are_read_as_rcl_reads_them(tmp_path):
+    """Reliability 2, item 9, in the parameter file: YAML 1.1 read mass: 1_0 as 10, 1:30 as
+    90 (base 60) and 0b1 as 1, where rcl's parser (strtoll, then strtod, each taking the whole
+    text) reads the strings '1_0', '1:30' and '0b1', which the node refuses as no number.
+    The API now refuses them alike, naming the parameter; and it reads as doubles what rcl
+    does and YAML 1.1 does not (-.5, .5e1)."""
+    with open(os.path.join(CONFIG, 'paper_four_bar_a.yaml'), encoding='utf-8') as stream:
+        text = stream.read()
+    assert text.count('mass: 1.0') == 3
+    path = tmp_path / 'four_bar.yaml'
+    for written in ('1_0', '1_0.5', '1:30', '1:30.5', '0b1'):
+        path.write_text(text.replace('mass: 1.0', f'mass: {written}', 1), encoding='utf-8')
+        assert load_params_file(str(path))['links.link1.mass'] == written
+        assert read_document(str(path), duplicate_keys=True)['/**']['ros__parameters'][
+            'links']['link1']['mass'] == written
+        with pytest.raises(MechanismConfigError) as info:
+            Mechanism.from_params_file(str(path))
+        assert info.value.parameter == 'links.link1.mass'
+        assert str(info.value) == f'links.link1.mass: must be a number, got {written!r}'
+    for written, value in (('-.5', -0.5), ('.5e1', 5.0), ('1e0', 1.0), ('010', 8), ('1', 1)):
+        path.write_text(text.replace('mass: 1.0', f'mass: {written}', 1), encoding='utf-8')
+        assert load_params_file(str(path))['links.link1.mass'] == value
