@@ -11,10 +11,11 @@ import warnings
 
 import pytest
 from test_urdf_input import CONFIG, four_bar_urdf, four_bar_urdf_params, inertial
+import yaml
 
 from cog_id_ros import Mechanism, MechanismConfigError
-from cog_id_ros.params_file import load_params_file, read_document
-from cog_id_ros.urdf_input import native_parameters
+from cog_id_ros.params_file import MAX_FILE_CHARS, load_params_file, read_document
+from cog_id_ros.urdf_input import MAX_URDF_SIZE, native_parameters
 
 
 def refused(params, base_dir=None):
@@ -239,3 +240,72 @@ def test_numbers_in_a_parameter_file_are_read_as_rcl_reads_them(tmp_path):
     for written, value in (('-.5', -0.5), ('.5e1', 5.0), ('1e0', 1.0), ('010', 8), ('1', 1)):
         path.write_text(text.replace('mass: 1.0', f'mass: {written}', 1), encoding='utf-8')
         assert load_params_file(str(path))['links.link1.mass'] == value
+
+
+# --- item 10: one size limit for a URDF -------------------------------------------------------
+
+def params_file_with(urdf, path, extra=''):
+    """A parameter file of the four-bar with ``urdf`` as its robot_description, written as a
+    YAML block scalar (indented, as a URDF is pasted into a file)."""
+    params = four_bar_urdf_params()
+    del params['robot_description']
+    rest = yaml.safe_dump(params, default_flow_style=None, width=1000)
+    text = ('/**:\n  ros__parameters:\n    robot_description: |-\n'
+            + ''.join(f'      {line}\n' for line in urdf.split('\n'))
+            + ''.join(f'    {line}\n' for line in rest.splitlines()) + extra)
+    path.write_text(text, encoding='utf-8')
+    return str(path)
+
+
+def padded(size):
+    """The four-bar URDF padded to ``size`` characters with <visual> elements (skipped by
+    the reader), as a URDF with meshes is."""
+    urdf = four_bar_urdf()
+    visual = ('<visual><geometry><mesh filename="meshes/ground_part_{:06d}.stl"/></geometry>'
+              '</visual>')
+    parts, k = [], 0
+    room = size - len(urdf) - len('<link name="ground"></link>') + len('<link name="ground"/>')
+    while room > 0:
+        item = visual.format(k) + '\n'
+        if len(item) > room:
+            item = ' ' * (room - 1) + '\n'
+        parts.append(item)
+        room -= len(item)
+        k += 1
+    urdf = urdf.replace('<link name="ground"/>',
+                        '<link name="ground">\n' + ''.join(parts)[:-1] + '</link>')
+    assert len(urdf) == size
+    return urdf
+
+
+def test_a_parameter_file_takes_a_robot_description_up_to_the_urdf_limit(tmp_path):
+    """Reliability 2, item 10: the parameter file's cap (512 kB) also capped the
+    robot_description in it, while the URDF reader takes 8 MB. A file with a 1 MB URDF
+    loads (in Mechanism.from_params_file and in the node's check of its files); the rest of
+    the file keeps its own cap."""
+    path = params_file_with(padded(1024 * 1024), tmp_path / 'big_urdf.yaml')
+    assert os.path.getsize(path) > 2 * MAX_FILE_CHARS
+    mech = Mechanism.from_params_file(path)
+    assert mech.joints == ['crank_joint', 'coupler_joint', 'rocker_joint', 'closing_joint']
+    assert mech.dof == 1
+    assert 'robot_description' in read_document(path, duplicate_keys=True)['/**'][
+        'ros__parameters']
+    comment = '# ' + 'x' * MAX_FILE_CHARS + '\n'
+    path = params_file_with(padded(1024 * 1024), tmp_path / 'too_much_else.yaml', comment)
+    with pytest.raises(MechanismConfigError) as info:
+        load_params_file(path)
+    assert info.value.parameter == 'params_file'
+    assert f'larger than the supported {MAX_FILE_CHARS // 1024} kB' in str(info.value)
+    assert 'robot_description' in str(info.value)
+
+
+def test_a_robot_description_beyond_the_urdf_limit_is_refused_naming_it(tmp_path):
+    """Reliability 2, item 10: a parameter file whose robot_description exceeds the URDF
+    reader's limit is refused on robot_description with that limit (not as a parameter
+    file too large)."""
+    path = params_file_with(padded(MAX_URDF_SIZE + 1), tmp_path / 'huge_urdf.yaml')
+    with pytest.raises(MechanismConfigError) as info:
+        Mechanism.from_params_file(path)
+    assert info.value.parameter == 'robot_description'
+    assert str(info.value) == (f'robot_description: is {MAX_URDF_SIZE + 1} characters long, '
+                               f'more than the supported 8 MB')
