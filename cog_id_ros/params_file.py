@@ -6,9 +6,11 @@ apply first and the node's own entry overrides them. Nested mappings become dott
 (``links.link1.mass``), exactly the names rclpy gives the node, so the dict this returns
 feeds ``Mechanism.from_parameters`` (which is what ``Mechanism.from_params_file`` does).
 
-The file is read as strictly as rcl reads it (floats may be written without a dot; a key
-written twice is an error here, where rcl lets the last one win) and defensively: only
-regular files of at most ``MAX_FILE_CHARS``, no FIFOs, no deeply nested flow collections,
+The file is read as strictly as rcl reads it (numbers as rcl reads them: floats may be
+written without a dot, and 1_0 or 1:30 are text, not numbers; a key written twice is an
+error here, where rcl lets the last one win) and defensively: only
+regular files of at most ``MAX_FILE_CHARS`` (not counting a ``robot_description``, which
+the URDF reader bounds), no FIFOs, no deeply nested flow collections,
 no recursive aliases. An array rcl's parser refuses makes the file an error here too,
 naming the parameter (:func:`rcl_value_problem`: an array that mixes integers and doubles,
 ``[0, -9.81, 0]``, or other types), in any node entry, as rcl refuses the whole file:
@@ -26,13 +28,21 @@ import yaml
 
 from .core.errors import MechanismConfigError
 from .core.parameters import flatten, show
+from .urdf_input import MAX_URDF_SIZE
 
 #: the node entry read when none is named (the node's default name)
 DEFAULT_NODE_NAME = 'cog_id_node'
 
-#: largest parameter file read (characters); a mechanism within the size limits of
-#: mechanism.py takes well under 100 kB, and 512 kB load in about 1.5 s on a small machine
+#: largest parameter file read (characters), not counting the values of its
+#: robot_description parameters: a URDF has one limit however it arrives, the URDF reader's
+#: (urdf_input.MAX_URDF_SIZE). A mechanism within the size limits of mechanism.py takes well
+#: under 100 kB, and 512 kB of YAML load in about 1.5 s on a small machine (what costs is
+#: YAML's structure: a long string is read in no time)
 MAX_FILE_CHARS = 512 * 1024
+#: most characters ever read from a parameter file: MAX_FILE_CHARS and a robot_description,
+#: with room for twice the URDF limit as written in YAML (a block's indentation, a quoted
+#: string's escapes), so that the URDF reader, not this one, refuses a URDF over its limit
+_MAX_READ = MAX_FILE_CHARS + 2 * MAX_URDF_SIZE
 #: deepest nesting of YAML flow collections ([...] and {...}) read; PyYAML's scanner takes
 #: time quadratic in it before its recursion gives up, and libyaml's parser crashes the
 #: process on deeply nested input (so does a line of many nested block entries, "- - - x")
@@ -91,13 +101,12 @@ def read_document(path, duplicate_keys=False):
         if not stat.S_ISREG(os.stat(path).st_mode):     # a FIFO would block the reader
             raise MechanismConfigError('params_file', f'{path} is not a regular file')
         with open(path, encoding='utf-8') as stream:
-            text = stream.read(MAX_FILE_CHARS + 1)
-        if len(text) > MAX_FILE_CHARS:
-            raise MechanismConfigError(
-                'params_file', f'{path} is larger than the supported {MAX_FILE_CHARS // 1024} kB; '
-                               f'a mechanism within the size limits (docs/mechanism.md) takes '
-                               f'far less: keep the mechanism in a file of its own')
-        _check_flow_depth(path, text)
+            text = stream.read(_MAX_READ + 1)
+        if len(text) > _MAX_READ:
+            raise _too_large(path)
+        _check_flow_depth(path, text)      # first: libyaml's parser crashes on deep nesting
+        if len(text) > MAX_FILE_CHARS and _beyond_cap(text, loader):
+            raise _too_large(path)
         return yaml.load(text, Loader=loader)   # noqa: S506 (a safe loader)
     except MechanismConfigError:
         raise
@@ -117,6 +126,47 @@ def read_document(path, duplicate_keys=False):
     except (ValueError, OverflowError) as exc:   # e.g. a YAML timestamp out of range
         raise MechanismConfigError(
             'params_file', f'{path} holds a value YAML cannot represent: {exc}') from None
+
+
+def _too_large(path):
+    return MechanismConfigError(
+        'params_file', f'{path} is larger than the supported {MAX_FILE_CHARS // 1024} kB, not '
+                       f'counting its robot_description (a URDF of up to '
+                       f'{MAX_URDF_SIZE // (1024 * 1024)} MB); a mechanism within the size limits '
+                       f'(docs/mechanism.md) takes far less: keep the mechanism in a file of its '
+                       f'own')
+
+
+def _beyond_cap(text, loader):
+    """Whether ``text`` holds more than MAX_FILE_CHARS characters outside the values of its
+    robot_description parameters (``<node entry>: ros__parameters: robot_description:``, a
+    string, with its quotes, escapes or block indentation).
+
+    Told from YAML's parse events, which cost little next to building the document, and
+    only up to the first event that ends beyond MAX_FILE_CHARS plus what robot_description
+    values took so far: the rest of an oversized file is never parsed."""
+    excluded = 0
+    open_ = []      # per open collection: [is a mapping, expects a key, its current key]
+    for event in yaml.parse(text, Loader=loader):
+        if isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            open_.pop()
+        elif isinstance(event, yaml.NodeEvent):       # scalar, alias, collection start
+            parent = open_[-1] if open_ else None
+            if parent is not None and parent[0]:
+                if parent[1]:                          # a key
+                    parent[2] = event.value if isinstance(event, yaml.ScalarEvent) else None
+                else:                                  # a value
+                    if isinstance(event, yaml.ScalarEvent) and len(open_) == 3 and \
+                            all(frame[0] for frame in open_) and \
+                            open_[1][2] == 'ros__parameters' and \
+                            open_[2][2] == 'robot_description':
+                        excluded += event.end_mark.index - event.start_mark.index
+                parent[1] = not parent[1]
+            if isinstance(event, yaml.CollectionStartEvent):
+                open_.append([isinstance(event, yaml.MappingStartEvent), True, None])
+        if event.end_mark.index - excluded > MAX_FILE_CHARS:
+            return True
+    return False
 
 
 def check_rcl_values(document, path):
@@ -193,7 +243,8 @@ _SafeBase = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)   # libyaml's parser w
 
 class RclLoader(_SafeBase):
     """YAML's safe loader (libyaml's parser where available: 50x faster) reading numbers as
-    rcl does: floats may be written without a dot (``1e9``, ``-1e-4``)."""
+    rcl does: floats may be written without a dot (``1e9``, ``-1e-4``) or a leading digit
+    (``-.5``), and ``1_0``, ``1:30`` and ``0b1`` are strings (YAML 1.1 reads 10, 90, 1)."""
 
 
 class ParamsLoader(RclLoader):
@@ -213,8 +264,19 @@ class ParamsLoader(RclLoader):
         return super().construct_mapping(node, deep)
 
 
+# Numbers as rcl reads them (rcl_yaml_param_parser, get_value: strtoll with base 0, then
+# strtod, each consuming the whole text, else a string). YAML 1.1's resolvers read digits
+# with '_' between them (1_0 as 10), base 60 (1:30 as 90) and binary (0b101 as 5), which rcl
+# reads as the strings '1_0', '1:30' and '0b101' (checked with rcl, Jazzy): left out, so the
+# API refuses them as the node does ("must be a number"). They do not read what strtod does
+# and rcl takes as a double: -.5, .5e3, 1e9 (no dot), 09: added.
+_INT, _FLOAT = 'tag:yaml.org,2002:int', 'tag:yaml.org,2002:float'
 RclLoader.yaml_implicit_resolvers = {
-    first: list(resolvers) for first, resolvers in _SafeBase.yaml_implicit_resolvers.items()}
+    first: [(tag, regexp) for tag, regexp in resolvers if tag not in (_INT, _FLOAT)]
+    for first, resolvers in _SafeBase.yaml_implicit_resolvers.items()}
+RclLoader.add_implicit_resolver(       # first: a text both match (12) is an integer, as in rcl
+    _INT, re.compile(r'^[-+]?(?:0[0-7]*|[1-9][0-9]*|0x[0-9a-fA-F]+)$'), list('-+0123456789'))
 RclLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float', re.compile(r'^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
-    list('-+0123456789'))
+    _FLOAT, re.compile(r'^(?:[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?'
+                       r'|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$'),
+    list('-+0123456789.'))

@@ -41,13 +41,22 @@ errors inside the URDF give its line and name the link or joint.
 """
 import math
 import os
+import re
 import stat
 from xml.parsers import expat
 
 import numpy as np
 
 from .core.errors import MechanismConfigError
-from .core.mechanism import NAME_PATTERN
+from .core.mechanism import (
+    MAX_COORDINATE,
+    MAX_INERTIA,
+    MAX_LENGTH,
+    MAX_MASS,
+    NAME_PATTERN,
+    bounded,
+    inertia_problem,
+)
 from .core.parameters import ParameterReader, as_float, show
 
 #: the joint types of ``loop_closures.<name>.type`` (those of the native schema)
@@ -68,6 +77,16 @@ MAX_URDF_SIZE = 8 * 1024 * 1024
 MAX_URDF_ELEMENTS = 200_000
 
 _ZERO = (0.0, 0.0, 0.0)
+#: a number as urdfdom reads one: std::stringstream >> double in the classic locale, the
+#: whole text consumed (urdf_model/utils.h, strToDouble). ASCII digits with an optional sign,
+#: decimal point and exponent; not the '1_0', other scripts' digits, 'inf', 'nan' or
+#: surrounding text that Python's float() also takes. A text that matches is read by float(),
+#: which gives the same correctly rounded double as the C library
+_NUMBER = re.compile(r'[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?')
+#: what separates the numbers of xyz, rpy: urdfdom splits at spaces, and XML turns the tabs
+#: and line breaks written in an attribute into spaces (a character reference such as &#9;
+#: survives as itself: taken as a separator too, never as part of a number)
+_SEPARATORS = re.compile(r'[ \t\r\n]+')
 #: parameters the URDF form consumes (everything else under mechanism.* passes through)
 _CONSUMED = ('robot_description', 'mechanism.urdf_file', 'mechanism.loop_closures',
              'mechanism.base_link', 'mechanism.initial_positions')
@@ -179,6 +198,10 @@ def _read_source(r, base_dir):
     except OSError as exc:
         raise MechanismConfigError(
             'mechanism.urdf_file', f'cannot read {path}: {exc.strerror or exc}') from None
+    except ValueError as exc:     # a NUL or a lone surrogate: no file can have that name
+        raise MechanismConfigError(
+            'mechanism.urdf_file', f'cannot read {show(path)}: not a possible file name '
+                                   f'({exc})') from None
     if len(data) > MAX_URDF_SIZE:
         raise MechanismConfigError(
             'mechanism.urdf_file', f'{path} is larger than the supported '
@@ -247,14 +270,50 @@ def _parse_xml(source):
     parser.EndElementHandler = end
     parser.StartDoctypeDeclHandler = refuse_doctype
     parser.EntityDeclHandler = refuse_entity
+    _check_encodable(source)
     try:
         parser.Parse(source.data, True)
     except expat.ExpatError as exc:
         raise source.error(exc.lineno, f'not well-formed XML (column {exc.offset + 1}): '
-                                       f'{expat.ErrorString(exc.code)}') from None
+                                       f'{expat.ErrorString(exc.code)}'
+                                       f'{_not_utf8(source.data, exc)}') from None
     except _Refused as exc:
         raise source.error(parser.CurrentLineNumber, str(exc)) from None
     return found[0]
+
+
+def _check_encodable(source):
+    """A robot_description string is handed to expat as UTF-8; a lone surrogate (a str made
+    from undecodable bytes, or a JSON or YAML "\\ud800" escape) has no UTF-8 form and would
+    escape as UnicodeEncodeError. Said here with its line and column instead."""
+    text = source.data
+    if not isinstance(text, str):
+        return
+    try:
+        text.encode('utf-8')
+    except UnicodeEncodeError as exc:
+        start = text.rfind('\n', 0, exc.start) + 1
+        raise source.error(
+            text.count('\n', 0, exc.start) + 1,
+            f'not well-formed XML (column {exc.start - start + 1}): '
+            f'U+{ord(text[exc.start]):04X} is a lone surrogate, not a character; remove it '
+            f'or write the character it stands for') from None
+
+
+def _not_utf8(data, error):
+    """Why a file's bytes did not parse, when it is that they are not UTF-8 (XML's encoding
+    unless the file declares another): expat says only "invalid token", on the line of the
+    first byte that is not; else ''."""
+    if not isinstance(data, bytes) or \
+            error.code != expat.errors.codes[expat.errors.XML_ERROR_INVALID_TOKEN]:
+        return ''
+    try:
+        data.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        if data.count(b'\n', 0, exc.start) + 1 == error.lineno:
+            return (f' (byte 0x{data[exc.start]:02x} is not UTF-8: save the file as UTF-8, or '
+                    f'declare its encoding in <?xml version="1.0" encoding="..."?>)')
+    return ''
 
 
 # --- the URDF's links and joints -------------------------------------------------------------
@@ -316,29 +375,55 @@ class _Robot:
             raise self.error(element.line, f'{what} has no <{tag}>')
         return found[0] if found else None
 
-    def _numbers(self, element, attribute, what, count=3, default=None):
+    def _numbers(self, element, attribute, what, count=3, default=None, bound=math.inf,
+                 unit='', low=None):
+        """The ``count`` numbers of an attribute, each written as urdfdom reads numbers
+        (_NUMBER) and within +-``bound`` (the native schema's bound for the value, or from
+        ``low`` to ``bound``): checked here, at the element, before any arithmetic on them
+        (fixed-joint merging, rotations) could overflow or hide the value as written."""
         text = element.attrib.get(attribute)
         if text is None:
             if default is None:
                 raise self.error(element.line,
                                  f'<{element.tag}> of {what} has no {attribute} attribute')
             return default
-        try:
-            values = tuple(float(x) for x in text.split())
-        except ValueError:
-            values = ()
-        if len(values) != count or not all(math.isfinite(x) for x in values):
+        where = f'{attribute}={show(text)} in <{element.tag}> of {what}'
+        tokens = [token for token in _SEPARATORS.split(text) if token]
+        for token in tokens:
+            if not _NUMBER.fullmatch(token):
+                raise self.error(element.line, f'{where}: {show(token)} is not a number; write '
+                                               f'numbers as urdfdom reads them: ASCII digits '
+                                               f'with an optional sign, decimal point and '
+                                               f'exponent (e.g. -1.5e-3)')
+        if len(tokens) != count:
             want = 'a number' if count == 1 else f'{count} numbers'
-            raise self.error(element.line, f'{attribute}={show(text)} in <{element.tag}> of '
-                                           f'{what}: must be {want}')
+            raise self.error(element.line, f'{where}: must be {want}')
+        values = tuple(float(token) for token in tokens)
+        for token, value in zip(tokens, values):
+            # the text as written, not the double: 1e400 overflows to inf
+            written = token if len(token) <= 40 else show(token)
+            if low is not None and value < low:
+                raise self.error(element.line, f'{where}: must be >= {low:g} {unit}, got '
+                                               f'{written}')
+            if not abs(value) <= bound or math.isinf(value):
+                if bound == math.inf:
+                    why = 'is too large for a double'
+                elif low is not None:
+                    why = f'must be at most {bound:g} {unit}'
+                else:
+                    why = f"{'entries ' if count > 1 else ''}must lie within +-{bound:g} {unit}"
+                raise self.error(element.line, f'{where}: {why}, got {written}')
         return values
 
     def _origin(self, element, what):
+        """xyz and rpy of the <origin> in ``element``, within the bounds the native schema
+        sets on the parent_xyz and parent_rpy (or com) they become."""
         origin = self._one(element, 'origin', what)
         if origin is None:
             return _ZERO, _ZERO
-        return (self._numbers(origin, 'xyz', what, default=_ZERO),
-                self._numbers(origin, 'rpy', what, default=_ZERO))
+        return (self._numbers(origin, 'xyz', what, default=_ZERO, bound=MAX_LENGTH, unit='m'),
+                self._numbers(origin, 'rpy', what, default=_ZERO, bound=MAX_COORDINATE,
+                              unit='rad'))
 
     def _link(self, element):
         name = self._name(element, 'link')
@@ -346,18 +431,25 @@ class _Robot:
         inertial = self._one(element, 'inertial', what)
         if inertial is None:         # massless
             return _Link(name, element.line, 0.0, _ZERO, np.zeros((3, 3)))
-        xyz, rpy = self._origin(inertial, what)
+        xyz, rpy = self._origin(inertial, f'<inertial> of {what}')
         mass = self._one(inertial, 'mass', f'<inertial> of {what}', required=True)
-        (value,) = self._numbers(mass, 'value', what, count=1)
-        if value < 0.0:
-            raise self.error(mass.line, f'mass of {what} must be >= 0 kg, got {value!r}')
+        (value,) = self._numbers(mass, 'value', what, count=1, low=0.0, bound=MAX_MASS,
+                                 unit='kg')
         tensor = self._one(inertial, 'inertia', f'<inertial> of {what}', required=True)
         ixx, ixy, ixz, iyy, iyz, izz = (
-            self._numbers(tensor, key, what, count=1)[0]
+            self._numbers(tensor, key, what, count=1, bound=MAX_INERTIA, unit='kg m^2')[0]
             for key in ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz'))
         inertia = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
         rotation = rpy_matrix(rpy)
-        return _Link(name, element.line, value, xyz, rotation @ inertia @ rotation.T)
+        inertia = rotation @ inertia @ rotation.T
+        # Checked here, on what the core would be given for this link alone (the link frame,
+        # symmetrised), rather than by the core: a link welded to another by a fixed joint
+        # reaches the core only inside their sum, under the other link's name
+        problem = inertia_problem(_six(inertia))
+        if problem:
+            frame = ' (rotated into the link frame by the <origin> rpy)' if any(rpy) else ''
+            raise self.error(tensor.line, f'<inertia> of {what}{frame}: {problem}')
+        return _Link(name, element.line, value, xyz, inertia)
 
     def _joint(self, element):
         name = self._name(element, 'joint')
@@ -518,8 +610,13 @@ def _read_closure(r, robot, name):
             raise MechanismConfigError(
                 prefix + side, f"unknown link '{link}' (not a link of the URDF: {listed})")
         ends.append(link)
-    offsets = tuple(r.vector(prefix + key, 3, default=_ZERO)
-                    for key in ('parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy'))
+    # bounded as written, as the core would bound them: on a link welded to another they
+    # reach the core re-expressed (an rpy of 1e300 as an angle within +-pi), under joints.*
+    offsets = tuple(bounded(prefix + key, r.vector(prefix + key, 3, default=_ZERO), bound, unit)
+                    for key, bound, unit in (('parent_xyz', MAX_LENGTH, 'm'),
+                                             ('parent_rpy', MAX_COORDINATE, 'rad'),
+                                             ('child_xyz', MAX_LENGTH, 'm'),
+                                             ('child_rpy', MAX_COORDINATE, 'rad')))
     axis = axis2 = None
     if kind in ('revolute', 'prismatic', 'universal'):
         axis = _axis(r, prefix + 'axis', (0.0, 0.0, 1.0))

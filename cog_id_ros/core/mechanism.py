@@ -231,7 +231,7 @@ class Mechanism:
                 raise MechanismConfigError(
                     prefix + 'mass', f'must be at most {MAX_MASS:g} kg, got {mass!r}')
             self.link_mass.append(mass)
-            self.link_com.append(_bounded(
+            self.link_com.append(bounded(
                 prefix + 'com', r.vector(prefix + 'com', 3, default=(0.0, 0.0, 0.0)),
                 MAX_LENGTH, 'm'))
             self.link_inertia.append(_inertia(r, prefix + 'inertia'))
@@ -279,7 +279,7 @@ class Mechanism:
                                      ('child_xyz', MAX_LENGTH, 'm'),
                                      ('child_rpy', MAX_COORDINATE, 'rad')):
                 value = r.vector(prefix + key, 3, default=(0.0, 0.0, 0.0))
-                offsets[key] = _bounded(prefix + key, value, bound, unit)
+                offsets[key] = bounded(prefix + key, value, bound, unit)
             spec = JointSpec(name=joint, revolute=(kind == 'revolute'), parent=ends[0],
                              child=ends[1], axis=axis, kind=kind,
                              axis2=axis2 if kind == 'universal' else (), **offsets)
@@ -323,8 +323,8 @@ class Mechanism:
                 'mechanism.initial_positions',
                 f'must have {n} entries, one per revolute or prismatic joint of '
                 f'mechanism.joints{extra}, got {len(values)}')
-        self.initial_positions = _bounded('mechanism.initial_positions', values,
-                                          MAX_COORDINATE, 'rad or m')
+        self.initial_positions = bounded('mechanism.initial_positions', values,
+                                         MAX_COORDINATE, 'rad or m')
         index = {name: k for k, name in enumerate(self.joints)}
         #: per active joint: (lower, upper) position limits and the effort limit (inf: none)
         self.active_position_limits = [self.position_limits[index[a]]
@@ -667,30 +667,41 @@ class Mechanism:
 
 def _inertia(r, name):
     values = r.vector(name, default=(0.0,) * 6)
-    if len(values) == 6:
-        ixx, iyy, izz, ixy, ixz, iyz = values
-        matrix = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
-    elif len(values) == 9:
-        matrix = np.array(values).reshape(3, 3)
-    else:
+    if len(values) not in (6, 9):
         raise MechanismConfigError(
             name, f'must have 6 entries [ixx, iyy, izz, ixy, ixz, iyz], got {len(values)}')
+    problem = inertia_problem(values)
+    if problem:
+        raise MechanismConfigError(name, problem)
+    return tuple(float(x) for x in _inertia_matrix(values).ravel())
+
+
+def _inertia_matrix(values):
+    if len(values) == 6:
+        ixx, iyy, izz, ixy, ixz, iyz = values
+        return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    return np.array(values).reshape(3, 3)
+
+
+def inertia_problem(values):
+    """What makes ``values`` (6 entries [ixx, iyy, izz, ixy, ixz, iyz], or 9 row by row,
+    finite) no rigid body's inertia, as a message, or None. One test for the native
+    ``links.<l>.inertia`` and for the URDF's ``<inertia>`` (urdf_input.py), so that both
+    accept the same tensors."""
+    matrix = _inertia_matrix(values)
     largest = float(np.abs(matrix).max())
     if largest > MAX_INERTIA:      # first: the checks below would overflow on huge entries
-        raise MechanismConfigError(
-            name, f'entries must lie within +-{MAX_INERTIA:g} kg m^2, got {largest!r}')
+        return f'entries must lie within +-{MAX_INERTIA:g} kg m^2, got {largest!r}'
     if not np.allclose(matrix, matrix.T, rtol=0.0, atol=1e-12 * max(1.0, largest)):
-        raise MechanismConfigError(name, f'must be symmetric, got {list(values)}')
+        return f'must be symmetric, got {list(values)}'
     moments = np.linalg.eigvalsh(matrix)
     tol = 1e-9 * max(1e-12, np.abs(moments).max())
     if moments[0] < -tol:
-        raise MechanismConfigError(
-            name, f'must be positive semi-definite, got principal moments {moments.tolist()}')
+        return f'must be positive semi-definite, got principal moments {moments.tolist()}'
     if moments[0] + moments[1] < moments[2] - tol:
-        raise MechanismConfigError(
-            name, f'violates the triangle inequality of principal moments '
-                  f'({moments[0]:.6g} + {moments[1]:.6g} < {moments[2]:.6g})')
-    return tuple(float(x) for x in matrix.ravel())
+        return (f'violates the triangle inequality of principal moments '
+                f'({moments[0]:.6g} + {moments[1]:.6g} < {moments[2]:.6g})')
+    return None
 
 
 def _unit_axis(r, name, default):
@@ -724,8 +735,9 @@ def _condition_number(a):
     return float(math.sqrt(float(np.sum(s * s))) * math.sqrt(float(np.sum(1.0 / (s * s)))))
 
 
-def _bounded(name, values, bound, unit):
-    """values unchanged, or MechanismConfigError if an entry exceeds +-bound."""
+def bounded(name, values, bound, unit):
+    """values unchanged, or MechanismConfigError if an entry exceeds +-bound. Also applied by
+    urdf_input.py to the loop closures' offsets as written, in the same words."""
     for k, x in enumerate(values):
         if abs(x) > bound:
             raise MechanismConfigError(
