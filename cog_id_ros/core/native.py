@@ -6,9 +6,23 @@ in a cache directory keyed by a hash of what it is made of (the mechanism's mode
 the core's source, kernels.kernel_key), the Python version, the flags and ``$CC`` if set:
 
 * the cache directory is ``$COG_ID_ROS_CACHE`` if set, else ``$XDG_CACHE_HOME/cog_id_ros``
-  or ``~/.cache/cog_id_ros``; a cached library there is used even when the directory is
-  read-only, and when it cannot be written the library is built in a temporary directory
-  for this process only;
+  (an absolute ``$XDG_CACHE_HOME`` only: a relative one is ignored, as the XDG spec says)
+  or ``$HOME/.cache/cog_id_ros``. Where there is none (no ``$HOME`` either) the library is
+  built for this process only, in a private temporary directory removed at its exit;
+* a library in the cache is loaded code: whoever can write there can run code as the user
+  who loads it. So the cache is trusted only when the directory is owned by this process's
+  user (its effective uid) and not writable by group or others, and the library, its
+  checksum and its sizes file are that user's and not writable by group or others either;
+  otherwise nothing is loaded from or written to it, one log line says why, and the
+  library is built in a private temporary directory for this process only. The cache
+  directory and the parents made for it get mode 0700 whatever the umask
+  (docs/reliability.md, "The kernel cache: who may write there");
+* a cached library there is used even when the directory is read-only, and when it cannot
+  be written the library is built in a private temporary directory for this process only;
+* what is loaded is what was checked: the library is opened once, its owner, mode and size
+  read from the open file, its bytes hashed and compared with the sha256 and the size
+  recorded when it was built, its ELF headers checked to lie within the file (a truncated
+  library would crash the process with SIGBUS), and the loader is given that open file;
 * the compiler is ``$CC`` if set, else ``cc``, ``gcc`` or ``clang`` on the PATH; it needs
   Python's headers (``Python.h``, the python3-dev package). A ``$CC`` that is not a command
   (an unbalanced quote, no executable) is no compiler: the Python kernels serve;
@@ -45,6 +59,8 @@ import os
 import shlex
 import shutil
 import signal
+import stat
+import struct
 import subprocess
 import sys
 import sysconfig
@@ -81,12 +97,26 @@ class NativeUnavailable(Exception):
     """No compiled kernels here: no compiler, no Python headers, or the build failed."""
 
 
+class _Untrusted(Exception):
+    """A file of the cache that another user wrote or may write: not loaded."""
+
+
+class _Damaged(Exception):
+    """A library that is not what was built (cut short, changed): not loaded."""
+
+
 def cache_directory():
-    """Where libraries are kept (see the module docstring)."""
+    """Where libraries are kept (see the module docstring), or None when there is no such
+    place (no $COG_ID_ROS_CACHE, no absolute $XDG_CACHE_HOME, no absolute $HOME)."""
     configured = os.environ.get('COG_ID_ROS_CACHE')
     if configured:
         return os.path.abspath(os.path.expanduser(configured))
-    base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
+    base = os.environ.get('XDG_CACHE_HOME', '')
+    if not os.path.isabs(base):               # the XDG spec: a relative path is ignored
+        home = os.environ.get('HOME', '')
+        if not os.path.isabs(home):           # empty or unset: not /.cache, shared by all
+            return None
+        base = os.path.join(home, '.cache')
     return os.path.join(base, 'cog_id_ros')
 
 
@@ -141,61 +171,78 @@ def load_module(key, make_source):
     text naming everything they are made of), from the cache or built now from
     ``make_source(module name) -> (C source, {kernel: operations})``. How large the kernels
     are chooses the optimisation."""
+    if not _CAN_CHECK_OWNERS:
+        raise NativeUnavailable('compiled kernels need a system where the owner of a cached '
+                                'library can be checked (POSIX: os.geteuid, os.open with '
+                                'dir_fd)')
     explicit = os.environ.get('CC', '')       # a compiler of one's own: libraries of its own
     digest = hashlib.sha256('\0'.join([key, sys.version, _suffix(), ' '.join(FLAGS),
                                        explicit]).encode()).hexdigest()[:20]
     name = f'cog_id_kernels_{digest}'
-    directory = cache_directory()
-    paths = _paths(directory, name)
-    operations = _read_json(paths['json'])
-    if operations is not None:
-        for level in ('O2', 'O0'):
-            if _intact(paths[level]):
-                try:
-                    module = _import(name, paths[level])
-                except ImportError:
-                    continue                  # damaged all the same: built again below
-                _touch(paths['json'])         # in use: not pruned
+    configured = cache_directory()
+    cache, writable = _open_cache(configured)
+    try:
+        if cache is not None:
+            try:
+                found = _load_cached(cache, configured, name)
+            except _Untrusted as exc:
+                _say_untrusted(configured, str(exc))
+                os.close(cache)
+                cache, found = None, None     # neither read nor written from now on
+            if found is not None:
+                module, operations, level = found
+                _touch(_paths(configured, name)['json'])   # in use: not pruned
                 if level == 'O0':             # an -O2 build that never finished: again
-                    _build_in_background(compiler(), directory, name)
+                    _build_in_background(compiler(), configured, name)
                 return module, operations
-    failure = _failed.get((directory, name))
-    if failure is not None:
-        raise NativeUnavailable(failure)
-    command, why = find_compiler()
-    if command is None:
-        raise NativeUnavailable(why)
-    include = _include()
-    source, operations = make_source(name)
+        failure = _failed.get((configured, name))
+        if failure is not None:
+            raise NativeUnavailable(failure)
+        command, why = find_compiler()
+        if command is None:
+            raise NativeUnavailable(why)
+        include = _include()
+        source, operations = make_source(name)
+        shared = cache is not None and writable
+        try:
+            module = _build_and_load(command, include, source, operations, name,
+                                     configured if shared else None)
+        except NativeUnavailable as exc:      # failed or timed out: not tried again
+            _failed[(configured, name)] = str(exc)
+            raise
+        return module, operations
+    finally:
+        if cache is not None:
+            os.close(cache)
+
+
+def _build_and_load(command, include, source, operations, name, directory):
+    """Build the library ``name`` in the cache ``directory`` (None: in a private directory
+    of this process) and load it; NativeUnavailable says why not."""
+    shared = directory is not None
     try:
-        os.makedirs(directory, exist_ok=True)
-        writable = os.access(directory, os.W_OK)
-    except OSError:
-        writable = False
-    remembered = (directory, name)
-    try:
-        if not writable:                      # for this process only, removed at its exit
-            directory = tempfile.mkdtemp(prefix='cog_id_ros-')
-            atexit.register(shutil.rmtree, directory, ignore_errors=True)
-            paths = _paths(directory, name)
-        else:
+        if not shared:                        # for this process only, removed at its exit
+            directory = _private_directory()
+        paths = _paths(directory, name)
+        if shared:
             _prune(directory)                 # before: what it frees helps a full disk
         _write_atomically(paths['c'], source)
         _write_atomically(paths['json'], json.dumps(operations))
-        if sum(operations.values()) > QUICK_ABOVE:
-            _build(command, include, paths['c'], paths['O0'], '-O0')
-            if writable:
-                _build_in_background(command, directory, name)
-            return _import(name, paths['O0']), operations
-        _build(command, include, paths['c'], paths['O2'], '-O2')
-        return _import(name, paths['O2']), operations
-    except NativeUnavailable as exc:          # failed or timed out: not tried again
-        _failed[remembered] = str(exc)
-        raise
-    except (OSError, ImportError) as exc:     # a full disk, a file that will not load ...
-        _failed[remembered] = (f'the compiled kernels could not be built or loaded in '
-                               f'{directory}: {exc}')
-        raise NativeUnavailable(_failed[remembered]) from None
+        level = 'O0' if sum(operations.values()) > QUICK_ABOVE else 'O2'
+        _build(command, include, paths['c'], paths[level], '-' + level)
+        fd = _open_directory(directory)
+        try:
+            module = _load_verified(fd, directory, name, level)
+        finally:
+            os.close(fd)
+        if module is None:
+            raise _Damaged(f'{paths[level]} is not there after its build')
+        if level == 'O0' and shared:
+            _build_in_background(command, directory, name)
+        return module
+    except (OSError, ImportError, _Damaged, _Untrusted) as exc:  # a full disk, a bad file ...
+        raise NativeUnavailable(f'the compiled kernels could not be built or loaded in '
+                                f'{directory}: {exc}') from None
 
 
 def _paths(directory, name):
@@ -204,28 +251,285 @@ def _paths(directory, name):
             'O0': base + '.O0' + _suffix(), 'lock': base + '.O2.lock'}
 
 
-def _read_json(path):
+# --- the trust model: what may be loaded -----------------------------------------------------
+
+#: whether this system can say who owns a file opened relative to a directory (not Windows)
+_CAN_CHECK_OWNERS = hasattr(os, 'geteuid') and os.open in os.supports_dir_fd
+
+_O_DIRECTORY = getattr(os, 'O_DIRECTORY', 0)
+_O_NOFOLLOW = getattr(os, 'O_NOFOLLOW', 0)
+_O_NONBLOCK = getattr(os, 'O_NONBLOCK', 0)    # a FIFO named like a library: no hang
+
+
+def _open_cache(directory):
+    """(descriptor of the cache directory, whether this process may write there), or
+    (None, False) when it is not to be used; one log line says why when it is a surprise
+    (none at all, or one that others may write)."""
+    if directory is None:
+        _say('cog_id_ros: no directory for the kernel cache ($COG_ID_ROS_CACHE is not set, '
+             '$XDG_CACHE_HOME is not an absolute path and $HOME is empty or not set): '
+             'compiled kernels are built for this process only; set COG_ID_ROS_CACHE to a '
+             'directory of your own to keep them')
+        return None, False
     try:
-        with open(path, encoding='utf-8') as f:
-            return json.load(f)
-    except (OSError, ValueError):
+        _make_private(directory)
+    except OSError:
+        pass                                  # read-only, or under a file: opened or not below
+    try:
+        return _open_directory(directory), os.access(directory, os.W_OK)
+    except _Untrusted as exc:
+        _say_untrusted(directory, str(exc))
+    except OSError:
+        pass                                  # not there: built for this process only
+    return None, False
+
+
+def _make_private(path):
+    """Make the directory ``path`` and its missing parents with mode 0700, whatever the
+    umask (os.makedirs gives the parents 0777 less the umask: 0777 under umask 000)."""
+    missing = []
+    while not os.path.lexists(path):
+        missing.append(path)
+        parent = os.path.dirname(path)
+        if parent == path:
+            break
+        path = parent
+    for path in reversed(missing):
+        try:
+            os.mkdir(path, 0o700)
+        except FileExistsError:
+            continue                          # made by someone else meanwhile: not ours
+        os.chmod(path, 0o700)                 # mkdir's mode is reduced by the umask only
+
+
+def _open_directory(path):
+    """A descriptor of the directory ``path`` (every file of the cache is then opened
+    relative to it: what was checked is what is read); _Untrusted when it is not this
+    user's or group or others may write it."""
+    fd = os.open(path, os.O_RDONLY | _O_DIRECTORY | os.O_CLOEXEC)
+    try:
+        problem = _untrusted(os.fstat(fd), path)
+    except BaseException:
+        os.close(fd)
+        raise
+    if problem:
+        os.close(fd)
+        raise _Untrusted(problem)
+    return fd
+
+
+def _untrusted(st, path):
+    """Why a file or directory of this stat may have been written by another user, or None."""
+    if st.st_uid != os.geteuid():
+        return f'{path} is owned by uid {st.st_uid}, not by uid {os.geteuid()} (this process)'
+    if st.st_mode & 0o022:
+        return (f'{path} has mode {stat.S_IMODE(st.st_mode):04o}: group or others may '
+                f'write it')
+    return None
+
+
+def _say(message):
+    """Log ``message`` once per process."""
+    if message not in _said:
+        _said.add(message)
+        _log.warning(message)
+
+
+_said = set()
+
+
+def _say_untrusted(directory, problem):
+    _say(f'cog_id_ros: compiled kernels are not loaded from the cache {directory}: {problem}, '
+         f'and whoever can write there could run code in this process; they are built for '
+         f'this process only, in a private temporary directory. To keep them: a cache '
+         f'directory owned by uid {os.geteuid()}, not writable by group or others (chmod '
+         f'go-w), or COG_ID_ROS_CACHE set to one (docs/reliability.md)')
+
+
+def _open_file(fd, filename, directory):
+    """(descriptor, stat) of the regular file ``filename`` in the cache directory of
+    descriptor ``fd`` (a symbolic link is not followed: this cache makes none), or
+    (None, None) when there is none; _Untrusted when it is another user's or group or
+    others may write it."""
+    try:
+        opened = os.open(filename, os.O_RDONLY | os.O_CLOEXEC | _O_NOFOLLOW | _O_NONBLOCK,
+                         dir_fd=fd)
+    except OSError:
+        return None, None
+    try:
+        st = os.fstat(opened)
+        problem = _untrusted(st, os.path.join(directory, filename))
+    except BaseException:
+        os.close(opened)
+        raise
+    if not stat.S_ISREG(st.st_mode):
+        os.close(opened)
+        return None, None
+    if problem:
+        os.close(opened)
+        raise _Untrusted(problem)
+    return opened, st
+
+
+def _read_file(fd, filename, directory):
+    """The bytes of ``filename`` (see :func:`_open_file`), or None."""
+    opened, _ = _open_file(fd, filename, directory)
+    if opened is None:
         return None
+    with os.fdopen(opened, 'rb') as f:
+        return f.read()
 
 
-def _digest(path):
-    with open(path, 'rb') as f:
-        return hashlib.sha256(f.read()).hexdigest()
-
-
-def _intact(path):
-    """True when the library is there and is what was built: its sha256 is the one written
-    beside it when the build finished (a truncated library would crash the process)."""
+def _load_cached(fd, directory, name):
+    """(module, operations, level) of the library ``name`` in the cache directory of
+    descriptor ``fd``, the -O2 build before the -O0 one, or None when neither is there
+    intact (it is then built again); _Untrusted when a file of it may be another user's."""
+    text = _read_file(fd, name + '.json', directory)
     try:
-        with open(path + '.sha256', encoding='ascii') as f:
-            return f.read().strip() == _digest(path)
+        operations = json.loads(text) if text is not None else None
+    except ValueError:
+        operations = None                     # damaged: built again
+    if not isinstance(operations, dict):
+        return None
+    for level in ('O2', 'O0'):
+        try:
+            module = _load_verified(fd, directory, name, level)
+        except (_Damaged, ImportError):
+            continue                          # not what was built: built again
+        if module is not None:
+            return module, operations, level
+    return None
+
+
+def _load_verified(fd, directory, name, level):
+    """The module of library ``name`` at ``level`` in the directory of descriptor ``fd``,
+    None when it or its checksum is not there. The library is opened once: its bytes are
+    hashed and compared with the sha256 and size recorded when it was built, its ELF headers
+    checked to lie within them, and the loader loads that open file, not the name again
+    (which another file could have taken meanwhile). _Damaged when it is not what was built,
+    ImportError when it will not load, _Untrusted as :func:`_open_file`."""
+    library = f'{name}.{level}{_suffix()}'
+    recorded = _read_file(fd, library + '.sha256', directory)
+    if recorded is None:
+        return None
+    opened, st = _open_file(fd, library, directory)
+    if opened is None:
+        return None
+    path = os.path.join(directory, library)
+    try:
+        data = _read_all(opened)
+        try:
+            digest, size = recorded.decode('ascii').split()
+            size = int(size)
+        except ValueError:                    # UnicodeDecodeError included
+            raise _Damaged(f'{path}.sha256 is not a checksum and a size') from None
+        if not len(data) == st.st_size == size:
+            raise _Damaged(f'{path} has {len(data)} bytes, {size} when it was built')
+        if hashlib.sha256(data).hexdigest() != digest:
+            raise _Damaged(f'{path} is not the library that was built (its sha256 differs)')
+        problem = _elf_problem(data)
+        if problem:
+            raise _Damaged(f'{path}: {problem}')
+    except BaseException:
+        os.close(opened)
+        raise
+    return _import_opened(name, opened, st, path)
+
+
+def _read_all(fd):
+    chunks = []
+    while True:
+        chunk = os.read(fd, 1 << 20)
+        if not chunk:
+            return b''.join(chunks)
+        chunks.append(chunk)
+
+
+#: (st_dev, st_ino) of every library loaded through its descriptor -> that descriptor, kept
+#: open for the life of the process (see _import_opened)
+_kept = {}
+
+
+def _import_opened(name, fd, st, path):
+    """The module of the library open as ``fd`` (stat ``st``, verified); the descriptor is
+    this function's to close or keep. The loader is given ``/proc/<pid>/fd/<fd>``: the very
+    file that was verified, whatever has become of ``path`` since. That descriptor is never
+    closed: the dynamic loader knows a library by the name it was given, and a later library
+    opened under the same descriptor number (the same name) would be taken for the first
+    one, loaded or not. Extension modules are never unloaded, so this costs a descriptor
+    per library, which its mappings outlive anyway; the same file loaded again uses the
+    descriptor kept for it. The pid in the name keeps a forked child's names apart from its
+    parent's. Without /proc the library is loaded by its path if that is still the file
+    that was verified."""
+    through = f'/proc/{os.getpid()}/fd/{{}}'
+    kept = _kept.get((st.st_dev, st.st_ino))
+    if kept is not None and _same_file(through.format(kept), st):
+        os.close(fd)
+        return _import(name, through.format(kept))
+    if _same_file(through.format(fd), st):
+        _kept[(st.st_dev, st.st_ino)] = fd    # the loader's name for it from now on
+        return _import(name, through.format(fd))
+    try:
+        if not _same_file(path, st):
+            raise _Damaged(f'{path} was replaced while it was being loaded')
+        return _import(name, path)
+    finally:
+        os.close(fd)
+
+
+def _same_file(path, st):
+    try:
+        here = os.stat(path)
     except OSError:
         return False
+    return (here.st_dev, here.st_ino) == (st.st_dev, st.st_ino)
 
+
+#: per ELF class (e_ident[4]): word format, offsets of e_phoff, e_shoff and e_phentsize,
+#: size of the file header, and in a program header the offsets of p_offset and p_filesz
+#: and its size
+_ELF = {1: ('I', 28, 32, 42, 52, 4, 16, 32), 2: ('Q', 32, 40, 54, 64, 8, 32, 56)}
+
+
+def _elf_problem(data):
+    """Why the dynamic loader would read beyond the end of this ELF library, or None. It
+    maps the segments at the offsets its headers give, and touching a mapped page beyond the
+    end of the file is a SIGBUS that kills the process, not an error: so every segment must
+    lie within the file. (Not ELF: another platform's format, whose loader checks its own.)"""
+    if data[:4] != b'\x7fELF':
+        return None
+    if len(data) < 6 or data[4] not in _ELF or data[5] not in (1, 2):
+        return 'not an ELF library of a known class and byte order'
+    word, at_phoff, at_shoff, at_sizes, header, at_offset, at_filesz, entry = _ELF[data[4]]
+    order = '<' if data[5] == 1 else '>'
+    end = len(data)
+    if end < header:
+        return f'cut short: {end} bytes, less than an ELF header'
+    phoff, = struct.unpack_from(order + word, data, at_phoff)
+    shoff, = struct.unpack_from(order + word, data, at_shoff)
+    phentsize, phnum, shentsize, shnum = struct.unpack_from(order + 'HHHH', data, at_sizes)
+    if phnum and (phentsize < entry or phoff + phnum * phentsize > end):
+        return f'cut short: its program headers are not within its {end} bytes'
+    for k in range(phnum):
+        at = phoff + k * phentsize
+        offset, = struct.unpack_from(order + word, data, at + at_offset)
+        filesz, = struct.unpack_from(order + word, data, at + at_filesz)
+        if offset + filesz > end:
+            return f'cut short: a segment ends at byte {offset + filesz} of its {end}'
+    if shoff and shoff + max(shnum, 1) * shentsize > end:
+        return f'cut short: its section headers end beyond its {end} bytes'
+    return None
+
+
+def _import(name, path):
+    loader = importlib.machinery.ExtensionFileLoader(name, path)
+    spec = importlib.util.spec_from_file_location(name, path, loader=loader)
+    module = importlib.util.module_from_spec(spec)
+    loader.exec_module(module)
+    return module
+
+
+# --- the cache's housekeeping ----------------------------------------------------------------
 
 #: days after its last use at which a cached library is removed (when another is built)
 KEEP_DAYS = 30
@@ -263,12 +567,22 @@ def _prune(directory):
                 pass
 
 
-def _import(name, path):
-    loader = importlib.machinery.ExtensionFileLoader(name, path)
-    spec = importlib.util.spec_from_file_location(name, path, loader=loader)
-    module = importlib.util.module_from_spec(spec)
-    loader.exec_module(module)
-    return module
+#: pid -> the private directory of that process (a forked child makes its own)
+_private = {}
+
+
+def _private_directory():
+    """A directory of this process only (mkdtemp: mode 0700), removed at its exit."""
+    directory = _private.get(os.getpid())
+    if directory is None or not os.path.isdir(directory):
+        directory = _private[os.getpid()] = tempfile.mkdtemp(prefix='cog_id_ros-')
+        atexit.register(_remove_private, directory, os.getpid())
+    return directory
+
+
+def _remove_private(directory, pid):
+    if os.getpid() == pid:                    # not a forked child's exit: the parent's own
+        shutil.rmtree(directory, ignore_errors=True)
 
 
 def _remove(path):
@@ -296,7 +610,7 @@ def _write_atomically(path, text, mode=0o644):
 # --- the compiler ----------------------------------------------------------------------------
 
 def _build(command, include, c_file, target, level):
-    """Compile, then the library and its sha256 appear (the checksum last). On any
+    """Compile, then the library and its sha256 and size appear (the checksum last). On any
     exception (a failure, a timeout, or one a signal handler raises to stop the process)
     the compiler is stopped and its output removed."""
     fd, tmp = tempfile.mkstemp(dir=os.path.dirname(target), prefix=_TEMPORARY,
@@ -304,13 +618,18 @@ def _build(command, include, c_file, target, level):
     os.close(fd)
     try:
         _compile(command, [level, *FLAGS, '-I' + include, c_file, '-o', tmp])
+        with open(tmp, 'rb') as f:
+            data = f.read()
+        problem = _elf_problem(data)
+        if problem:
+            raise NativeUnavailable(f'the C compiler {command[0]} made a damaged library '
+                                    f'({problem})')
         os.chmod(tmp, 0o755)
-        digest = _digest(tmp)
         os.replace(tmp, target)
     except BaseException:
         _remove(tmp)
         raise
-    _write_atomically(target + '.sha256', digest + '\n')
+    _write_atomically(target + '.sha256', f'{hashlib.sha256(data).hexdigest()} {len(data)}\n')
 
 
 def _compile(command, arguments):

@@ -1,15 +1,22 @@
-"""The kernel cache under stress: hung and broken compilers, build debris.
+"""The kernel cache under stress: hung and broken compilers, other users, damaged files, debris.
 
-The regression tests of the reliability issue's items 3, 7 and 8 (their docstrings say
-"Reliability 2, item N"). Each test uses a cache directory of its own
+The regression tests of the reliability issue's items 3, 5, 6, 7 and 8 (their docstrings
+say "Reliability 2, item N"). Each test uses a cache directory of its own
 (``COG_ID_ROS_CACHE``), a fresh Mechanism, and forgets the builds that failed in this process.
 Tests that start a compiler that never returns kill whatever of it is left at their end.
+
+"Another user" is uid 65534 (nobody) when the tests run as root: files and directories are
+given to it with chown. Otherwise they are made writable by group and others, which any
+user can do and which the cache must refuse just the same.
 """
 import glob
+import hashlib
+import json
 import logging
 import os
 from pathlib import Path
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -17,12 +24,14 @@ import threading
 import time
 
 from mechanisms import from_yaml
+import numpy as np
 import pytest
 
 import cog_id_ros
 from cog_id_ros.core import kernels, native
 
 ROOT = Path(__file__).resolve().parents[2]
+OTHER_UID = 65534
 
 needs_cc = pytest.mark.skipif(native.compiler() is None, reason='no C compiler here')
 linux_only = pytest.mark.skipif(not sys.platform.startswith('linux'),
@@ -112,6 +121,16 @@ def hung(tmp_path):
             os.kill(pid, signal.SIGKILL)
 
 
+def hand_to_another_user(path):
+    """Make ``path`` a file or directory that another user may write: theirs (as root),
+    else writable by group and others. What the cache must not load from."""
+    if os.geteuid() == 0:
+        os.chown(path, OTHER_UID, OTHER_UID)
+        return f'owned by uid {OTHER_UID}'
+    os.chmod(path, 0o777 if os.path.isdir(path) else 0o666)
+    return 'group or others may write it'
+
+
 def run_python(code, **env):
     return subprocess.run([sys.executable, '-c', code], cwd=ROOT, capture_output=True,
                           text=True, timeout=120, env=dict(os.environ, **env))
@@ -194,6 +213,165 @@ def test_the_compiler_dies_with_the_process_that_started_it(cache, hung):
         loader.kill()
         loader.wait()
     assert hung.all_dead(), [pid for pid in hung.pids() if alive(pid)]
+
+
+# --- item 5: who may write to the cache ------------------------------------------------------
+
+def impostor_source(mechanism):
+    """make_source for load_module: the C of ``mechanism``'s kernels."""
+    return lambda module: kernels.c_module_source(
+        module, [(name, params, record.__name__, fields)
+                 for name, params, record, fields in kernels.trace(mechanism)])
+
+
+def plant(directory, tmp_path, monkeypatch):
+    """Files in ``directory`` that pass for the cached kernels of paper_four_bar_a (the
+    library, its checksum and sizes, as the cache writes them) but compute those of a
+    four-bar with a heavier coupler: what another user who can write there could leave."""
+    planter = tmp_path / 'planter'
+    monkeypatch.setenv('COG_ID_ROS_CACHE', str(planter))
+    heavier = fresh(**{'links.link2.mass': 2.0 * from_yaml('config/paper_four_bar_a.yaml')
+                       ['links.link2.mass']})
+    native.load_module(kernels.kernel_key(fresh()), impostor_source(heavier))
+    directory.mkdir(exist_ok=True, mode=0o700)
+    for path in planter.iterdir():
+        if path.name.endswith(('.so', '.sha256', '.json')):
+            shutil.copy(path, directory / path.name)
+    monkeypatch.setenv('COG_ID_ROS_CACHE', str(directory))
+    return cog_id_ros.InverseDynamics(heavier, backend='python')
+
+
+def listing(directory):
+    return sorted((p.name, p.stat().st_mtime_ns, p.stat().st_size) for p in directory.iterdir())
+
+
+@needs_cc
+def test_a_cache_directory_another_user_may_write_is_not_loaded_from(cache, tmp_path,
+                                                                     monkeypatch, caplog):
+    """Reliability 2, item 5: with the cache directory another user's, that user replaced a
+    cached library and its checksum, and root's next load ran the planted code (doubled
+    torques, no message). Nothing is loaded from, or written to, such a directory: the
+    kernels are built for this process only, and one log line names the directory and why."""
+    impostor = plant(cache, tmp_path, monkeypatch)
+    why = hand_to_another_user(cache)
+    before = listing(cache)
+    with caplog.at_level(logging.WARNING, logger='cog_id_ros'):
+        solvers = [cog_id_ros.InverseDynamics(fresh(), backend='native') for _ in range(2)]
+    reference = cog_id_ros.InverseDynamics(fresh(), backend='python')
+    sample = ([1.6], [0.3], [1.0])
+    assert not np.array_equal(impostor.torques(*sample), reference.torques(*sample))
+    for solver in solvers:
+        assert solver.backend == 'native'
+        assert np.array_equal(solver.torques(*sample), reference.torques(*sample))
+    said = [r.getMessage() for r in caplog.records if str(cache) in r.getMessage()]
+    assert len(said) == 1 and why in said[0] and 'this process only' in said[0], said
+    assert listing(cache) == before
+
+
+@needs_cc
+def test_a_cached_library_another_user_may_write_is_not_loaded(cache, tmp_path, monkeypatch,
+                                                               caplog):
+    """Reliability 2, item 5: in a directory of one's own, the files of a library (the
+    library, its checksum, its sizes) must be one's own and not writable by others too."""
+    impostor = plant(cache, tmp_path, monkeypatch)
+    library, = libraries(cache)
+    for path in (library, library + '.sha256', *glob.glob(str(cache / '*.json'))):
+        why = hand_to_another_user(path)
+    with caplog.at_level(logging.WARNING, logger='cog_id_ros'):
+        solver = cog_id_ros.InverseDynamics(fresh(), backend='native')
+    reference = cog_id_ros.InverseDynamics(fresh(), backend='python')
+    sample = ([1.6], [0.3], [1.0])
+    assert not np.array_equal(impostor.torques(*sample), reference.torques(*sample))
+    assert np.array_equal(solver.torques(*sample), reference.torques(*sample))
+    said = [r.getMessage() for r in caplog.records if str(cache) in r.getMessage()]
+    assert len(said) == 1 and why in said[0], said
+
+
+@needs_cc
+def test_the_cache_directory_is_made_private_whatever_the_umask(tmp_path, monkeypatch):
+    """Reliability 2, item 5: under umask 000 the cache directory and the parents made for
+    it were 0777: anyone could plant a library there."""
+    directory = tmp_path / 'made' / 'for' / 'cache'
+    monkeypatch.setenv('COG_ID_ROS_CACHE', str(directory))
+    umask = os.umask(0)
+    try:
+        cog_id_ros.InverseDynamics(fresh(), backend='native')
+    finally:
+        os.umask(umask)
+    for path in (tmp_path / 'made', tmp_path / 'made' / 'for', directory):
+        assert oct(path.stat().st_mode & 0o777) == oct(0o700), path
+    assert len(libraries(directory)) == 1                 # and used: it is one's own
+
+
+def test_a_relative_xdg_cache_home_is_ignored(tmp_path, monkeypatch):
+    """Reliability 2, item 5: the XDG spec says a relative $XDG_CACHE_HOME is invalid and
+    ignored; it made a cache relative to whatever the working directory was."""
+    monkeypatch.delenv('COG_ID_ROS_CACHE', raising=False)
+    monkeypatch.setenv('HOME', str(tmp_path))
+    monkeypatch.setenv('XDG_CACHE_HOME', 'relative/cache')
+    assert native.cache_directory() == str(tmp_path / '.cache' / 'cog_id_ros')
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path / 'xdg'))
+    assert native.cache_directory() == str(tmp_path / 'xdg' / 'cog_id_ros')
+
+
+@needs_cc
+@pytest.mark.parametrize('home', ['', None])
+def test_without_a_home_the_kernels_are_built_for_the_process_not_in_slash_cache(
+        monkeypatch, caplog, home):
+    """Reliability 2, item 5: an empty $HOME put the cache at /.cache/cog_id_ros, one
+    directory for every user without a home. Without a cache directory the kernels are
+    built in a private directory for the process, and one log line says how to keep them."""
+    monkeypatch.delenv('COG_ID_ROS_CACHE', raising=False)
+    monkeypatch.delenv('XDG_CACHE_HOME', raising=False)
+    if home is None:
+        monkeypatch.delenv('HOME', raising=False)
+    else:
+        monkeypatch.setenv('HOME', home)
+    monkeypatch.setattr(native, '_said', set(), raising=False)
+    assert native.cache_directory() is None
+    existed = os.path.exists('/.cache/cog_id_ros')
+    with caplog.at_level(logging.WARNING, logger='cog_id_ros'):
+        solver = cog_id_ros.InverseDynamics(fresh(), backend='native')
+    assert solver.backend == 'native'
+    assert os.path.exists('/.cache/cog_id_ros') == existed
+    said = [r.getMessage() for r in caplog.records if 'kernel cache' in r.getMessage()]
+    assert len(said) == 1 and 'COG_ID_ROS_CACHE' in said[0], said
+
+
+# --- item 6: what is loaded is what was checked ----------------------------------------------
+
+@needs_cc
+def test_a_truncated_library_whose_checksum_matches_is_not_loaded(cache):
+    """Reliability 2, item 6: a library cut short, with a checksum that matches it, crashed
+    the process with SIGBUS when loaded (the loader maps its segments beyond the end of
+    the file). It is built again. Loaded in a subprocess, so that a crash fails this test
+    instead of killing pytest."""
+    expected = cog_id_ros.InverseDynamics(fresh(), backend='native').torques([1.6], [0.3],
+                                                                             [1.0])
+    library, = libraries(cache)
+    with open(library, 'rb') as f:
+        whole = f.read()
+    cut = whole[:len(whole) // 3]
+    with open(library + '.cut', 'wb') as f:   # a new file: the loaded one stays mapped intact
+        f.write(cut)
+    os.replace(library + '.cut', library)
+    # its checksum made to match the cut library in every field the cache records
+    with open(library + '.sha256', encoding='ascii') as f:
+        record = f.read()
+    record = record.replace(hashlib.sha256(whole).hexdigest(), hashlib.sha256(cut).hexdigest())
+    record = re.sub(rf'\b{len(whole)}\b', str(len(cut)), record)
+    with open(library + '.sha256', 'w', encoding='ascii') as f:
+        f.write(record)
+    loaded = run_python('import json, cog_id_ros\n'
+                        's = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_params_file('
+                        '"config/paper_four_bar_a.yaml"), backend="native")\n'
+                        'print(json.dumps(s.torques([1.6], [0.3], [1.0]).tolist()))',
+                        COG_ID_ROS_CACHE=str(cache))
+    assert loaded.returncode == 0, (f'signal {-loaded.returncode}' if loaded.returncode < 0
+                                    else loaded.stderr)
+    assert np.array_equal(json.loads(loaded.stdout), expected)
+    with open(library, 'rb') as f:
+        assert f.read() == whole                  # built again, and replaced
 
 
 # --- item 7: a compiler setting that cannot be used ------------------------------------------
