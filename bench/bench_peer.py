@@ -81,7 +81,10 @@ def load_cost(path, kwargs, peer=False, cache=None):
 def background_builds_done(cache, limit=180.0):
     """Wait until the -O2 builds that a first load started in the background (native.py:
     large kernels load at -O0 first) have finished in ``cache``: a compiler left running
-    would share the 2 cores with every timing that follows. True if there was one."""
+    would share the 2 cores with every timing that follows. True if there was one.
+    ``cache`` None: no cache directory (native.cache_directory), nothing built in background."""
+    if cache is None:
+        return False
     deadline = time.time() + limit
     waited = False
     while glob.glob(os.path.join(cache, '*.lock')) and time.time() < deadline:
