@@ -1,9 +1,14 @@
 """Install cog_id_ros: as an ament_python package under colcon, or with pip into a venv."""
 from glob import glob
+import os
 
 from setuptools import find_packages, setup
 
 PACKAGE = 'cog_id_ros'
+#: every file of config/, not only its parameter files: a config may refer to another file
+#: by a path relative to itself (crank_rocker_urdf.yaml's urdf_file: crank_rocker.urdf), and
+#: an installed config whose file was left behind cannot be loaded
+CONFIG_FILES = sorted(path for path in glob('config/*') if os.path.isfile(path))
 
 setup(
     name=PACKAGE,
@@ -12,7 +17,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
-        ('share/' + PACKAGE + '/config', sorted(glob('config/*.yaml') + glob('config/*.csv'))),
+        ('share/' + PACKAGE + '/config', CONFIG_FILES),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
     zip_safe=True,

@@ -4,16 +4,28 @@
 
 What it does, end to end, as a user would:
   1. starts two ``cog_id_node`` processes, one per parameter file
-     (config/paper_four_bar_a.yaml in namespace /fig4_a, paper_four_bar_b.yaml in /fig4_b);
+     (config/paper_four_bar_a.yaml in namespace /fig4_a, paper_four_bar_b.yaml in /fig4_b),
+     reporting /diagnostics every 0.2 s and keeping the whole run in ``joint_effort``'s
+     writer history (so a late recorder is sent again what it missed);
   2. plays the paper's target motion ``theta(t) = pi/2 + 0.5 sin(pi t)``, t in [0, 2] s, at
      ``--rate`` setpoints per second into each node's ``joint_setpoint`` with the player of
-     ``cog_id_player`` (positions only: the node estimates velocities and accelerations);
-  3. records ``joint_effort`` and compares it with the exact torques of the parallelogram,
+     ``cog_id_player`` (positions only: the node estimates velocities and accelerations),
+     once the node's subscription and the recorder's are matched and the node has answered
+     the first setpoint;
+  3. records ``joint_effort`` in a process of its own (``cog_id_ros.ros.recorder``, a queue
+     as deep as the run) and compares it with the exact torques of the parallelogram,
      ``tau3 = (5/3) m L^2 thetaddot + 2 m g L cos(theta)`` for (a), half of it on each
      actuator for (b);
   4. writes the torque curves of (a) and (b) side by side to a PNG and the recorded
-     efforts to CSVs beside it (format of ``cog_id_torques``), prints a summary table,
-     and exits 0 when every torque after the first samples is within 1 % of the peak.
+     efforts to CSVs beside it (format of ``cog_id_torques``), prints a summary table and,
+     per node, the setpoints sent, what the node says it did with them (its
+     /diagnostics counters, read before it is stopped) and the efforts recorded.
+
+Exit status: 0 when every setpoint was answered and recorded and every torque after the
+first samples is within 1 % of the peak; 1 when a torque is not (or a node did not exit
+cleanly); 3 when any setpoint went unanswered or unrecorded, with one line per node
+saying where (``/fig4_a: node: 16 setpoints lost before the node took them``,
+``/fig4_b: recorder: 343 efforts the node sent were not recorded``).
 
 It uses ROS_DOMAIN_ID from the environment (or picks one from the process id when unset, and
 says which), with discovery limited to this machine.
@@ -30,10 +42,15 @@ import time
 import numpy as np
 
 from ..offline import trajectory_io
+from ..ros import recorder as recording
+from ..ros.parameters import MAX_QOS_DEPTH
 from .paper_four_bar import DURATION, config_dir, exact_torque, target_motion
 
 WARM_UP = 3                       # samples the estimator needs before it is exact
 TOLERANCE = 0.01                  # of the peak torque
+LOST = 3                          # exit status: setpoints went unanswered or unrecorded
+#: s between the nodes' /diagnostics reports: their counters are read once a run is over
+DIAGNOSTICS_PERIOD = 0.2
 
 CASES = (
     # key, params file, namespace, active joints, share of the single-actuator torque
@@ -45,12 +62,13 @@ CASES = (
 class NodeProcess:
     """A cog_id_node subprocess whose log lines are collected (so its pipe never fills)."""
 
-    def __init__(self, params_file, namespace, env):
+    def __init__(self, params_file, namespace, env, extra=()):
         exe = os.path.join(os.path.dirname(sys.executable), 'cog_id_node')
         cmd = [exe] if os.path.exists(exe) else [sys.executable, '-m', 'cog_id_ros.node']
         self.namespace = namespace
         self.proc = subprocess.Popen(
-            cmd + ['--ros-args', '--params-file', params_file, '-r', f'__ns:={namespace}'],
+            cmd + ['--ros-args', '--params-file', params_file, '-r', f'__ns:={namespace}',
+                   *extra],
             env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
             text=True)
         self.lines = []
@@ -89,23 +107,49 @@ class NodeProcess:
         return [line for line in self.lines if '[WARN]' in line or '[ERROR]' in line]
 
 
-def run_case(player_cls, context, case, t, theta, rate):
-    """Play the target motion into one node; returns the recorded efforts and statistics."""
-    key, _, namespace, joints, share = case
-    player = player_cls(joints, topic=f'{namespace}/joint_setpoint',
-                        collect=f'{namespace}/joint_effort',
-                        node_name=f'fig4_player_{key}', context=context)
-    try:
-        if not player.wait_for_node(30.0):
-            raise RuntimeError(f'no cog_id_node answers on {namespace}')
-        positions = np.repeat(theta[:, None], len(joints), axis=1)
-        stamps = player.play(t, positions)
-        names, efforts, found = player.collect(stamps, timeout=5.0)
-    finally:
-        player.destroy_node()
+def node_arguments(n_setpoints):
+    """ROS arguments of the node in ``namespace`` for a run of ``n_setpoints``: returns
+    ``namespace -> [arguments]``."""
+    def extra(namespace):
+        # joint_effort's writer keeps the whole run (at most the node's bound on depths): a
+        # reliable writer resends only what its history still holds, so with the default
+        # 100 a recorder stalled for 0.1 s at 1 kHz would lose efforts for good. The
+        # setpoint side keeps the node's own QoS: what the node drops there is its own
+        # behaviour under load, which the demo reports.
+        return ['-p', f'diagnostics_period:={DIAGNOSTICS_PERIOD}',
+                '-p', f'qos_overrides.{namespace}/joint_effort.publisher.depth:='
+                      f'{min(n_setpoints, MAX_QOS_DEPTH)}']
+    return extra
+
+
+def connect(player, recorder, namespace):
+    """Wait until the player's setpoints reach the node and the node's efforts the
+    recorder, both as far as matching can tell (see Recorder.answer_first for the rest)."""
+    if not player.wait_for_node(30.0):
+        raise RuntimeError(f'no cog_id_node subscribes to {namespace}/joint_setpoint')
+    if not recorder.wait_matched([f'{namespace}/joint_effort'], 30.0):
+        raise RuntimeError(f'the recorder does not receive {namespace}/joint_effort')
+
+
+def run_case(player, recorder, case, t, theta):
+    """Play the target motion into one node; returns the recorded efforts, which setpoints
+    have one, and the run's :class:`~cog_id_ros.ros.recorder.Account`."""
+    from ..ros.player import play_recorded
+    _, _, namespace, joints, _ = case
+    effort_topic = f'{namespace}/joint_effort'
+    positions = np.repeat(theta[:, None], len(joints), axis=1)
+    stamps, result, received = play_recorded(
+        player, recorder, effort_topic, recording.diagnostics_name(namespace), t, positions,
+        where=namespace)
+    found = np.array([s in received for s in stamps])
+    names = next((received[s][0] for s in stamps if s in received), list(joints))
     if list(names) != list(joints):
-        raise RuntimeError(f'{namespace}/joint_effort names {names}, expected {joints}')
-    return efforts, found
+        raise RuntimeError(f'{effort_topic} names {names}, expected {joints}')
+    efforts = np.full((len(stamps), len(joints)), np.nan)
+    for i, s in enumerate(stamps):
+        if s in received:
+            efforts[i] = received[s][1]
+    return efforts, found, result
 
 
 def settled(found):
@@ -191,26 +235,47 @@ def main(argv: list[str] | None = None) -> int:
 
     started = time.monotonic()
     cfg = config_dir()
-    procs = {case[0]: NodeProcess(os.path.join(cfg, case[1]), case[2], env) for case in CASES}
+    t = np.arange(int(round(DURATION * args.rate)) + 1) / args.rate
+    extra = node_arguments(len(t))
+    procs = {case[0]: NodeProcess(os.path.join(cfg, case[1]), case[2], env, extra(case[2]))
+             for case in CASES}
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     from ..ros.player import Player
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    t = np.arange(int(round(DURATION * args.rate)) + 1) / args.rate
     theta, _, thetaddot = target_motion(t)
     exact_a = exact_torque(theta, thetaddot)
     results = []
+    accounts = []
+    recorder = None
+    players = {}
     try:
+        # one effort per setpoint at most: a queue of len(t) never pushes one out
+        recorder = recording.Recorder([f'{case[2]}/joint_effort' for case in CASES], len(t))
+        for key, _, namespace, joints, _ in CASES:
+            # the publisher's history holds the whole run: a setpoint the node was slow to
+            # acknowledge is resent, so what is lost is lost in the node's own queue (which
+            # it counts); both players exist from the start so both discoveries overlap
+            players[key] = Player(joints, topic=f'{namespace}/joint_setpoint',
+                                  node_name=f'fig4_player_{key}', context=context,
+                                  depth=len(t))
         for case in CASES:
             print(f'{case[2]}: {procs[case[0]].wait_started()}')
         for case in CASES:
-            efforts, found = run_case(Player, context, case, t, theta, args.rate)
+            connect(players[case[0]], recorder, case[2])
+        for case in CASES:
+            efforts, found, account = run_case(players[case[0]], recorder, case, t, theta)
             exact = case[4] * exact_a
+            accounts.append(account)
             results.append((case[0], case, efforts, found, exact,
                             statistics(t, efforts, found, exact)))
     finally:
+        for player in players.values():
+            player.destroy_node()
+        if recorder is not None:
+            recorder.close()
         context.try_shutdown()
         codes = {key: proc.stop() for key, proc in procs.items()}
     plot(args.output, t, results, args.rate)
@@ -226,18 +291,18 @@ def main(argv: list[str] | None = None) -> int:
               'within 1%')
     print('  '.join(f'{h:>15s}' for h in header))
     ok = True
-    lost = 0
     for key, case, efforts, found, exact, stats in results:
-        lost += int((~found).sum())
         for joint, st in zip(case[3], stats):
             ok &= st['within']
             cells = (f'({key})', joint, f'{int(found.sum())}/{found.size}', f'{st["peak"]:.4f}',
                      f'{st["max_error"]:.2e}', f'{st["rms_error"]:.2e}',
                      'yes' if st['within'] else 'NO')
             print('  '.join(f'{c:>15s}' for c in cells))
-    if lost:
-        print(f'note: {lost} setpoint(s) got no answer (dropped from a full queue: the machine '
-              f'could not keep up at {args.rate:g} Hz); the torques around them are still checked')
+    for account in accounts:
+        node = ('no report from the node' if not account.reported else
+                f'node answered {account.accepted}, rejected {account.rejected}, '
+                f'counted {account.lost} lost')
+        print(f'{account.where}: sent {account.sent}, {node}, recorded {account.recorded}')
     print(f'wrote {args.output} and {base}_a.csv, {base}_b.csv '
           f'in {time.monotonic() - started:.1f} s')
     for proc in procs.values():
@@ -246,6 +311,13 @@ def main(argv: list[str] | None = None) -> int:
     if any(code != 0 for code in codes.values()):
         print(f'a node did not exit cleanly: {codes}', file=sys.stderr)
         ok = False
+    # a setpoint without its recorded effort is a hole in the figure and the CSVs: never a
+    # success, whichever side lost it
+    losses = [f'{a.where}: {a.losses()}' for a in accounts if not a.complete]
+    for line in losses:
+        print(line, file=sys.stderr)
+    if losses:
+        return LOST
     return 0 if ok else 1
 
 

@@ -28,13 +28,22 @@ def paper_torques(t):
     return out[0][:, 0], out[1]
 
 
+def fixed(x, width, decimals=4):
+    """``x`` in fixed point; a value that rounds to zero prints 0, never -0 (the torques at
+    the turning points are a few 1e-16 either side of zero, and ``-0.0000`` reads as a
+    sign that is not there)."""
+    # round() gives the digits format() would print; adding 0.0 turns -0.0 into 0.0
+    return f'{round(float(x), decimals) + 0.0:{width}.{decimals}f}'
+
+
 def format_table(t, tau_a, tau_b):
     lines = ['paper four-bar (Sonoda, Ishii, Isobe), target motion theta = pi/2 + 0.5 sin(pi t)',
              f"{'t [s]':>6} {'theta [rad]':>12} | {'(a) tau3 [Nm]':>14} | "
              f"{'(b) tau1 [Nm]':>14} {'(b) tau3 [Nm]':>14}"]
     th = target_motion(t)[0]
-    for row in zip(t, th, tau_a, tau_b[:, 0], tau_b[:, 1]):
-        lines.append('{:6.2f} {:12.4f} | {:14.4f} | {:14.4f} {:14.4f}'.format(*row))
+    for time, theta, a, b1, b3 in zip(t, th, tau_a, tau_b[:, 0], tau_b[:, 1]):
+        lines.append(f'{fixed(time, 6, 2)} {fixed(theta, 12)} | {fixed(a, 14)} | '
+                     f'{fixed(b1, 14)} {fixed(b3, 14)}')
     lines.append(f'peak |tau|: (a) {np.max(np.abs(tau_a)):.4f} Nm; (b) '
                  f'{np.max(np.abs(tau_b[:, 0])):.4f} / {np.max(np.abs(tau_b[:, 1])):.4f} Nm '
                  f'(the minimum-norm pair: each crank carries half of (a))')

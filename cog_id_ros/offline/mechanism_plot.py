@@ -27,9 +27,24 @@ SAME_POINT = 1e-6
 PAD = 0.12
 #: and more on the right of a 2-D drawing, where the names are written
 RIGHT = 0.08
+#: resolution of the picture, dots per inch (the figure is laid out at it too)
+DPI = 90
 #: joints and links are named on the picture up to these counts
 MAX_JOINT_LABELS = 12
 MAX_LINK_LABELS = 8
+
+#: names are drawn above every other artist of the axes, on a light box: the joint markers
+#: (zorder 6-7) and COG dots (5) used to be drawn over them. 1000, not just above 7:
+#: mplot3d renumbers the collections and patches of 3-D axes by depth, one zorder each
+#: from about 1 upwards, so a small number could fall below a marker there
+LABEL_ZORDER = 1000
+LABEL_BOX = {'boxstyle': 'round,pad=0.15', 'facecolor': 'white', 'edgecolor': 'none',
+             'alpha': 0.75}
+#: offsets (points) of a joint's name and a link's name from the joint and the COG: clear
+#: of the largest marker there (the loop-closing ring, 9 points in radius with its edge;
+#: the heaviest COG dot, 7), so the name's box does not cover it
+JOINT_LABEL_OFFSET = (10, 7)
+LINK_LABEL_OFFSET = (9, -13)
 
 ACTIVE_COLOR = '#d62728'
 CLOSING_COLOR = '#ff7f0e'
@@ -213,6 +228,12 @@ def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=
     ``snapshots``: [(time, q)] drawn faded behind (earlier lighter), each ``q`` as above.
     ``fmt``: the image format (``path`` may be a temporary name). ``warning``: a line shown
     in red under the title."""
+    figure = mechanism_figure(mech, q, snapshots, title, subtitle, warning)
+    figure.savefig(path, format=fmt, dpi=DPI)
+
+
+def mechanism_figure(mech, q, snapshots=(), title=None, subtitle=None, warning=None):
+    """The matplotlib Figure :func:`draw_mechanism` saves (arguments as there)."""
     from matplotlib.figure import Figure
 
     pose = Pose(mech, q)
@@ -226,14 +247,14 @@ def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=
         extent = extent + np.array([2.0 * PAD + RIGHT, 2.0 * PAD]) * max(float(extent.max()),
                                                                          1e-9)   # as finish()
         height = min(max(6.6 * extent[1] / extent[0], 2.0), 6.4)   # the axes, in inches
-        fig = Figure(figsize=(8.0, height + 2.4), layout='constrained')
+        fig = Figure(figsize=(8.0, height + 2.4), dpi=DPI, layout='constrained')
         ax = fig.add_subplot()
         view = _View2D(ax, basis, normal)
         ax.set_xlabel(labels[0])
         ax.set_ylabel(labels[1])
         kind = 'planar'
     else:
-        fig = Figure(figsize=(8.0, 7.0), layout='constrained')
+        fig = Figure(figsize=(8.0, 7.0), dpi=DPI, layout='constrained')
         ax = fig.add_subplot(projection='3d')
         view = _View3D(ax)
         ax.set_xlabel('x [m]')
@@ -248,7 +269,7 @@ def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=
     _draw_links(view, pose, colors)
     _draw_cogs(view, pose, colors)
     _draw_joints(view, pose)
-    _label(view, mech, pose, colors)
+    labels = _label(view, mech, pose, colors)
     view.finish([pose.all_points()] + [g.all_points() for _, g in ghosts]
                 + [pose.base_points])
     handles = _legend_handles(mech, pose, ghosts)
@@ -259,14 +280,46 @@ def draw_mechanism(path, mech, q, snapshots=(), fmt='png', title=None, subtitle=
     fig.suptitle(heading + (f'\n{subtitle}' if subtitle else ''), fontsize=11)
     if warning:
         ax.set_title(warning, color=ACTIVE_COLOR, fontsize=9)
-    fig.savefig(path, format=fmt, dpi=90)
+    _separate(fig, view, labels)
+    return fig
+
+
+def _separate(fig, view, labels):
+    """Move a name away from its point (up when it is above it, down when below) until its
+    box is clear of the boxes of the names placed before it: names of points close
+    together (a joint and a closing joint beside it, links whose COGs nearly coincide)
+    were written over one another."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    if len(labels) < 2:
+        return
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw_without_rendering()                 # the layout, hence where the names are
+    # and no second layout when saving: it would move the axes a little (constrained
+    # layout run twice does not land on the same place), and the names with them
+    fig.set_layout_engine('none')
+    gap = 1.0 * fig.dpi / 72.0                   # pixels between two boxes
+    placed = []
+    for label in labels:
+        box = label.get_bbox_patch().get_window_extent(renderer)
+        up = view.offset(label)[1] >= 0
+        for _ in range(len(placed) + 1):
+            hit = next((b for b in placed if b.overlaps(box)), None)
+            if hit is None:
+                break
+            move = hit.y1 - box.y0 + gap if up else hit.y0 - box.y1 - gap
+            box = box.translated(0.0, move)
+            view.shift(label, 72.0 * move / fig.dpi)
+        placed.append(box)
 
 
 def _label(view, mech, pose, colors):
-    """Name the joints (those at one point together) and the links, on small mechanisms."""
+    """Name the joints (those at one point together) and the links, on small mechanisms;
+    returns the names' Text artists."""
+    drawn = []
     if len(pose.joints) <= MAX_JOINT_LABELS:
         for point, names in _joint_groups(pose):
-            view.text(point, '/'.join(names), fontsize=8, color='#444444', offset=(5, 5))
+            drawn.append(view.text(point, '/'.join(names), fontsize=8, color='#444444',
+                                   offset=JOINT_LABEL_OFFSET))
     if len(mech.links) <= MAX_LINK_LABELS:
         labels = []          # links drawn over one another are named together
         for (name, points, cog, _), color in zip(pose.links, colors):
@@ -279,8 +332,9 @@ def _label(view, mech, pose, colors):
             else:
                 labels.append((cog, [name], color))
         for cog, names, color in labels:
-            view.text(cog, '/'.join(names), fontsize=8, color=color, fontweight='bold',
-                      offset=(7, -10))
+            drawn.append(view.text(cog, '/'.join(names), fontsize=8, color=color,
+                                   fontweight='bold', offset=LINK_LABEL_OFFSET))
+    return drawn
 
 
 def _legend_handles(mech, pose, ghosts):
@@ -334,7 +388,19 @@ class _View2D:
 
     def text(self, point, text, offset=(4, 4), **kw):
         p = self.xy(point)[0]
-        self.ax.annotate(text, p, xytext=offset, textcoords='offset points', **kw)
+        return self.ax.annotate(text, p, xytext=offset, textcoords='offset points',
+                                zorder=LABEL_ZORDER, bbox=LABEL_BOX, **kw)
+
+    @staticmethod
+    def offset(label):
+        """A name's offset from its point, points."""
+        return label.xyann
+
+    @staticmethod
+    def shift(label, up):
+        """Move a name ``up`` points (down when negative)."""
+        x, y = label.xyann
+        label.xyann = (x, y + up)
 
     def finish(self, point_sets):
         pts = self.xy(np.vstack([p for p in point_sets if len(p)]))
@@ -365,9 +431,29 @@ class _View3D:
         self.ax.scatter(p[:, 0], p[:, 1], p[:, 2], depthshade=False, **kw)
 
     def text(self, point, text, offset=(4, 4), **kw):
-        x, y, z = np.asarray(point, float)     # no offset in points on 3-D axes: a space
-        self.ax.text(x, y, z, '    ' + text, ha='left', va='bottom' if offset[1] > 0 else 'top',
-                     **kw)
+        x, y, z = np.asarray(point, float)
+        label = self.ax.text(x, y, z, text, ha='left', va='bottom', zorder=LABEL_ZORDER,
+                             bbox=LABEL_BOX, **kw)
+        label.offset = tuple(offset)
+        self._place(label)
+        return label
+
+    def _place(self, label):
+        # a 3-D text is drawn at its projected point through its transform: the data
+        # transform shifted by ``offset`` points puts it beside the marker, like annotate
+        from matplotlib.transforms import offset_copy
+        label.set_transform(offset_copy(self.ax.transData, fig=self.ax.figure,
+                                        x=label.offset[0], y=label.offset[1], units='points'))
+
+    @staticmethod
+    def offset(label):
+        """A name's offset from its point, points."""
+        return label.offset
+
+    def shift(self, label, up):
+        """Move a name ``up`` points (down when negative)."""
+        label.offset = (label.offset[0], label.offset[1] + up)
+        self._place(label)
 
     def finish(self, point_sets):
         pts = np.vstack([p for p in point_sets if len(p)])

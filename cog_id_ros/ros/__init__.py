@@ -8,4 +8,6 @@
   conversions.py     ROS messages <-> arrays, rejection reasons, the trajectory process
   stop_signals.py    SIGINT / SIGTERM during start-up
   player.py          ``cog_id_player``: a CSV trajectory published as setpoints
+  recorder.py        the efforts recorded in a process of their own, and the account of a
+                     run: every setpoint answered and recorded, or where it went
 """

@@ -16,7 +16,17 @@ positions, and through the velocities when the file has them).
 
 ``--output`` records ``joint_effort`` (matched to the setpoints by stamp) to a CSV of the
 offline tool's output format: ``time`` and ``<joint>.effort``, an empty cell where no
-effort came back (a rejected setpoint).
+effort came back. The recording is done by a process of its own
+(:class:`cog_id_ros.ros.recorder.Recorder`); the first setpoint goes alone until its effort
+is recorded (proof that the node and the recorder are connected both ways), the others
+follow on their schedule, stamped as above. At the end the setpoints sent, the node's
+counters (its ``/diagnostics``) and the efforts recorded are compared: when any setpoint
+went unanswered or unrecorded the CSV is still written and a line says where they went
+(``node: ...`` or ``recorder: ...``), exit status 3.
+
+Exit status: 0 every setpoint answered (and recorded, with ``--output``); 1 no node, or
+no effort at all; 2 bad arguments or CSV; 3 setpoints unanswered or unrecorded (without
+``--output``: not acknowledged by the node); 4 ``--output`` cannot be written; 130 Ctrl-C.
 """
 import argparse
 import sys
@@ -24,45 +34,51 @@ import time
 
 import numpy as np
 import rclpy
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from ..offline import trajectory_io
+from . import recorder as recording
 from . import stop_signals
-from .conversions import NANOSECONDS, stamp_to_ns
+from .conversions import NANOSECONDS
 from .topics import control_qos
 
-#: the recorder must not drop what the node sends while the player is busy publishing
+#: s to wait for the node's first /diagnostics report before a recorded run (three of its
+#: default diagnostics_period); without one, losses are counted but not placed
+REPORT_WAIT = 3.0
+#: exit status when setpoints went unanswered or unrecorded
+LOST = 3
+
+#: a deep reliable subscription for probes that record what the node sends (the tests')
 RECORDER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
                           reliability=ReliabilityPolicy.RELIABLE)
 
 
 class Player(Node):
-    """Publishes setpoints on a schedule and records the efforts that come back.
+    """Publishes setpoints on a schedule.
 
     ``joints``: names of the setpoints' joints; ``topic``: where setpoints go (relative
-    names follow the node's namespace); ``collect``: the JointState topic to record
-    (``None``: record nothing).
+    names follow the node's namespace); ``depth``: keep-last depth of the setpoint
+    publisher (default the node's, CONTROL_QOS_DEPTH). A reliable writer can resend only
+    what its history still holds: give the length of a recorded run, and a setpoint the
+    node was slow to acknowledge is resent instead of lost (what the node then drops from
+    its own queue it counts as ``setpoints_lost``). The efforts are recorded by
+    :class:`cog_id_ros.ros.recorder.Recorder`, in a process of its own.
     """
 
-    def __init__(self, joints, topic='joint_setpoint', collect='joint_effort',
-                 node_name='cog_id_player', **kwargs):
+    def __init__(self, joints, topic='joint_setpoint', node_name='cog_id_player', depth=None,
+                 **kwargs):
         super().__init__(node_name, **kwargs)
         self.joints = list(joints)
-        self.publisher = self.create_publisher(JointState, topic, control_qos())
-        self.received = {}     # stamp (ns) -> (names, positions, velocities, efforts)
-        self.subscription = None
-        if collect:
-            self.subscription = self.create_subscription(JointState, collect, self._on_effort,
-                                                         RECORDER_QOS)
+        qos = control_qos()
+        if depth is not None:
+            qos.depth = int(depth)
+        self.publisher = self.create_publisher(JointState, topic, qos)
         self._spinner = SingleThreadedExecutor(context=self.context)
         self._spinner.add_node(self)
-
-    def _on_effort(self, msg):
-        self.received[stamp_to_ns(msg.header.stamp)] = (
-            list(msg.name), list(msg.position), list(msg.velocity), list(msg.effort))
 
     def spin_for(self, seconds):
         """Handle incoming messages for ``seconds`` of wall time."""
@@ -71,13 +87,10 @@ class Player(Node):
             self._spinner.spin_once(timeout_sec=left)
 
     def wait_for_node(self, timeout=10.0):
-        """Wait until the setpoint topic has a subscriber (and the recorded one a publisher)."""
+        """Wait until the setpoint topic has a matched subscriber."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            ready = self.publisher.get_subscription_count() > 0
-            if self.subscription is not None:
-                ready = ready and self.count_publishers(self.subscription.topic_name) > 0
-            if ready:
+            if self.publisher.get_subscription_count() > 0:
                 self.spin_for(0.2)   # let the other side's discovery finish too
                 return True
             self._spinner.spin_once(timeout_sec=0.02)
@@ -112,22 +125,42 @@ class Player(Node):
             self.publisher.publish(msg)
         return stamps
 
-    def collect(self, stamps, timeout=2.0):
-        """Wait (up to ``timeout`` s) for the efforts of ``stamps``; returns them.
+    def wait_delivered(self, timeout=10.0):
+        """True once every matched subscriber acknowledged every setpoint published.
 
-        ``(names, efforts (N, M) with NaN rows where nothing came, found (N,) bool)``.
+        Call it before destroying the player: a reliable writer destroyed right after its
+        last publish takes the setpoints not yet acknowledged with it, and the node never
+        gets (nor counts) the end of the stream.
         """
-        end = time.monotonic() + timeout
-        while time.monotonic() < end and not all(s in self.received for s in stamps[-1:]):
-            self._spinner.spin_once(timeout_sec=0.05)
-        self.spin_for(0.05)
-        found = np.array([s in self.received for s in stamps])
-        names = next((self.received[s][0] for s in stamps if s in self.received), [])
-        efforts = np.full((len(stamps), len(names)), np.nan)
-        for i, s in enumerate(stamps):
-            if s in self.received:
-                efforts[i] = self.received[s][3]
-        return names, efforts, found
+        return self.publisher.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))
+
+
+def play_recorded(player, recorder, effort_topic, status, times, positions, velocities=None,
+                  where=None):
+    """Play a run into the node and record its answers: returns ``(stamps, account,
+    received)`` (see :meth:`Recorder.settle`; ``where`` names the node in the account,
+    default ``effort_topic``).
+
+    The first setpoint goes alone until its effort is recorded (the node's side of both
+    matches, see :meth:`Recorder.answer_first`), then the rest on their schedule; the
+    stamps stay those of one stream (``start + times[i] - times[0]``). The player must
+    stay alive until this returns: its writer resends what the node has not acknowledged
+    yet.
+    """
+    before = recorder.first_report(status, timeout=REPORT_WAIT)
+    first_v = None if velocities is None else velocities[:1]
+    rest_v = None if velocities is None else velocities[1:]
+    start = player.get_clock().now().nanoseconds
+    recorder.answer_first(effort_topic, status, start,
+                          lambda: player.play(times[:1], positions[:1], first_v, start_ns=start),
+                          before, lambda: player.wait_delivered(0.0))
+    stamps = [start]
+    if len(times) > 1:
+        offset = int(round((times[1] - times[0]) * NANOSECONDS))
+        stamps += player.play(times[1:], positions[1:], rest_v, start_ns=start + offset)
+    result, received = recorder.settle(where or effort_topic, effort_topic, status, stamps,
+                                       before)
+    return stamps, result, received
 
 
 def joints_of(path):
@@ -175,6 +208,9 @@ def build_parser():
     p.add_argument('--no-velocity', action='store_true', help='do not send the velocity columns')
     p.add_argument('--output', help='record joint_effort to this CSV (time, <joint>.effort)')
     p.add_argument('--effort-topic', default='joint_effort', help='default %(default)s')
+    p.add_argument('--node', default='cog_id_node',
+                   help='name of the node (in the namespace of --ros-args) whose /diagnostics '
+                        'say where unanswered setpoints went (default %(default)s)')
     p.add_argument('--wait', type=float, default=10.0,
                    help='seconds to wait for the node to appear (default %(default)s)')
     return p
@@ -198,7 +234,10 @@ def main(argv: list[str] | None = None) -> int:
         times, q, qd = resample(times, q, qd, args.rate)
     stop = stop_signals.DeferredStop()   # a Ctrl-C while the node is built stops it cleanly
     rclpy.init(args=argv, signal_handler_options=stop.RCLPY_OPTIONS)
-    player = Player(joints, args.topic, args.effort_topic if args.output else None)
+    # the whole file in the writer's history (see Player): no setpoint is lost for want of
+    # a copy to resend
+    player = Player(joints, args.topic, depth=len(times))
+    recorder = None
     try:
         if stop.hand_over(restore_python_handlers=True) is not None:
             return 130
@@ -207,27 +246,53 @@ def main(argv: list[str] | None = None) -> int:
                   f'after {args.wait:g} s (is cog_id_node running, in this namespace and '
                   'ROS_DOMAIN_ID?)', file=sys.stderr)
             return 1
-        print(f'cog_id_player: playing {len(times)} setpoints of {", ".join(joints)} over '
-              f'{times[-1] - times[0]:.3f} s into {player.publisher.topic_name}', file=sys.stderr)
-        stamps = player.play(times, q, qd)
         if args.output:
-            names, efforts, found = player.collect(stamps)
-            if not found.any():
-                print(f'cog_id_player: no effort came back on {args.effort_topic}',
+            effort_topic = player.resolve_topic_name(args.effort_topic)
+            # at most one effort per setpoint: a queue of the file's length never drops one
+            recorder = recording.Recorder([effort_topic], len(times))
+            if not recorder.wait_matched(timeout=args.wait):
+                print(f'cog_id_player: nothing publishes {effort_topic} after {args.wait:g} s',
                       file=sys.stderr)
                 return 1
-            try:
-                trajectory_io.write_efforts(args.output, times, efforts, found, names)
-            except OSError as exc:     # also a FIFO or device refused as --output
-                print(f'cog_id_player: --output {args.output}: cannot write: '
-                      f'{exc.strerror or exc}', file=sys.stderr)
-                return 4
-            print(f'cog_id_player: {int(found.sum())} of {len(stamps)} efforts recorded to '
-                  f'{args.output}', file=sys.stderr)
+        print(f'cog_id_player: playing {len(times)} setpoints of {", ".join(joints)} over '
+              f'{times[-1] - times[0]:.3f} s into {player.publisher.topic_name}', file=sys.stderr)
+        if not args.output:
+            player.play(times, q, qd)
+            if not player.wait_delivered():
+                print(f'cog_id_player: {player.publisher.topic_name}: the node did not '
+                      'acknowledge every setpoint in 10 s', file=sys.stderr)
+                return LOST
+            return 0
+        status = recording.diagnostics_name(player.get_namespace(), args.node)
+        stamps, account, received = play_recorded(player, recorder, effort_topic, status,
+                                                  times, q, qd, where=args.node)
+        found = np.array([s in received for s in stamps])
+        if not found.any():
+            print(f'cog_id_player: no effort came back on {effort_topic}', file=sys.stderr)
+            return 1
+        names = next(received[s][0] for s in stamps if s in received)
+        efforts = np.full((len(stamps), len(names)), np.nan)
+        for i, s in enumerate(stamps):
+            if s in received:
+                efforts[i] = received[s][1]
+        try:
+            trajectory_io.write_efforts(args.output, times, efforts, found, names)
+        except OSError as exc:     # also a FIFO or device refused as --output
+            print(f'cog_id_player: --output {args.output}: cannot write: '
+                  f'{exc.strerror or exc}', file=sys.stderr)
+            return 4
+        print(f'cog_id_player: {int(found.sum())} of {len(stamps)} efforts recorded to '
+              f'{args.output}', file=sys.stderr)
+        if not account.complete:
+            # the CSV is written (an empty cell per missing effort) but the run is not whole
+            print(f'cog_id_player: {account.where}: {account.losses()}', file=sys.stderr)
+            return LOST
     except KeyboardInterrupt:
         return 130
     finally:
         player.destroy_node()
+        if recorder is not None:
+            recorder.close()
         rclpy.try_shutdown()
     return 0
 

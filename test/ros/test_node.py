@@ -213,7 +213,7 @@ def resting_torque(mechanism, q, v=None):
 
 def play_target(probe, rclpy_context, joints, with_velocity, seconds=2.0):
     """The paper's target motion at 1 kHz (stamps), published at 2/3 real time."""
-    player = Player(joints, topic=f'{probe.namespace}/joint_setpoint', collect=None,
+    player = Player(joints, topic=f'{probe.namespace}/joint_setpoint',
                     node_name=f'player{probe.namespace.replace("/", "_")}', context=rclpy_context)
     try:
         assert player.wait_for_node()
