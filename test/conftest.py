@@ -104,6 +104,8 @@ class RosProcess:
                 self.proc.kill()
                 self.proc.wait()
         self._reader.join(timeout=2)
+        if not self._reader.is_alive():
+            self.proc.stdout.close()    # read to its end: closed, not left to the collector
         return self.proc.returncode
 
 

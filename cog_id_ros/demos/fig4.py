@@ -101,6 +101,8 @@ class NodeProcess:
                 self.proc.kill()
                 self.proc.wait()
         self._reader.join(timeout=2)
+        if not self._reader.is_alive():
+            self.proc.stdout.close()       # read to its end
         return self.proc.returncode
 
     def warnings(self):

@@ -1,4 +1,6 @@
 """Every configuration error of the mechanism parameter file (README) names its parameter."""
+import pathlib
+
 from mechanisms import double_pendulum, four_bar, from_yaml, with_changes
 import pytest
 
@@ -98,7 +100,7 @@ def test_params_file_errors_name_the_file(tmp_path):
 
 
 def test_node_entry_overrides_the_wildcard(tmp_path):
-    text = open(PAPER_A, encoding='utf-8').read()
+    text = pathlib.Path(PAPER_A).read_text(encoding='utf-8')
     path = tmp_path / 'both.yaml'
     path.write_text(text + '\ncog_id_node:\n  ros__parameters:\n    mechanism:\n      name: renamed\n')
     assert cog_id_ros.Mechanism.from_params_file(str(path)).name == 'renamed'
@@ -108,14 +110,17 @@ def test_node_entry_overrides_the_wildcard(tmp_path):
 def test_assembly_holds_the_actuators_at_their_initial_positions():
     from mechanisms import four_bar
     # a rough guess of the passive joints: assembly closes the loop around joint1 = 0.8
-    mech = cog_id_ros.Mechanism.from_parameters(
-        four_bar(ground=0.6, crank=0.2, coupler=0.6, rocker=0.4, active=('joint1',),
-                 init=[0.8, -0.4, 1.5, 0.4]))
+    # (and says it moved them far)
+    with pytest.warns(cog_id_ros.AssemblyWarning, match='moved passive joint'):
+        mech = cog_id_ros.Mechanism.from_parameters(
+            four_bar(ground=0.6, crank=0.2, coupler=0.6, rocker=0.4, active=('joint1',),
+                     init=[0.8, -0.4, 1.5, 0.4]))
     assert mech.assembled_positions[0] == 0.8
     # rounded, slightly inconsistent redundant initial positions still assemble
     rounded = with_changes(from_yaml('config/paper_four_bar_b.yaml'),
                            mechanism__initial_positions=[1.5708, -1.5708, 1.5707, 1.5708])
-    assert cog_id_ros.Mechanism.from_parameters(rounded).dof == 1
+    with pytest.warns(cog_id_ros.AssemblyWarning, match='within mechanism.setpoint_tolerance'):
+        assert cog_id_ros.Mechanism.from_parameters(rounded).dof == 1
 
 
 # --- Reliability item 4: whatever a file or dict holds, only MechanismConfigError, fast ------
@@ -469,7 +474,7 @@ def test_a_fifo_as_params_file_is_refused_instead_of_blocking(tmp_path):
 def test_a_key_written_twice_is_an_error_not_the_last_one_winning(tmp_path):
     """Reliability item 4: 'mass: 1.0' then 'mass: -5.0' in one mapping silently took the
     second; a ROS parameter file with a repeated key is a mistake to point at."""
-    text = open(PAPER_A, encoding='utf-8').read().replace(
+    text = pathlib.Path(PAPER_A).read_text(encoding='utf-8').replace(
         '        mass: 1.0\n', '        mass: 1.0\n        mass: 2.0\n', 1)
     path = tmp_path / 'dup.yaml'
     path.write_text(text, encoding='utf-8')
@@ -480,7 +485,7 @@ def test_a_key_written_twice_is_an_error_not_the_last_one_winning(tmp_path):
 def test_floats_without_a_dot_are_numbers_as_rcl_reads_them(tmp_path):
     """Reliability item 4: YAML 1.1 reads '1e0' as a string, so the API refused
     'mass: 1e0' as not a number while the node (rcl) reads 1.0."""
-    text = open(PAPER_A, encoding='utf-8').read().replace('mass: 1.0', 'mass: 1e0')
+    text = pathlib.Path(PAPER_A).read_text(encoding='utf-8').replace('mass: 1.0', 'mass: 1e0')
     path = tmp_path / 'e.yaml'
     path.write_text(text, encoding='utf-8')
     assert cog_id_ros.Mechanism.from_params_file(str(path)).link_mass == [1.0, 1.0, 1.0]

@@ -12,7 +12,7 @@ def make(params):
 
 def long_ground():
     """Ground 0.9 m, other links 0.5 m, driven at joint1: the crank cannot point backwards."""
-    return make(four_bar(ground=0.9, active=('joint1',), init=[1.2, -1.0, 1.9, 1.0]))
+    return make(four_bar(ground=0.9, active=('joint1',), init=[1.2, -1.2332, 2.0244, 2.0575]))
 
 
 def test_unreachable_pose_raises_closure_error_with_residual_and_keeps_the_branch():
@@ -83,7 +83,7 @@ def test_skip_mode_marks_bad_samples_and_serves_the_rest():
     assert isinstance(ev.errors[3], cog_id_ros.SetpointError)
     assert np.all(np.isfinite(ev.torques)) and np.all(ev.torques[~ev.valid] == 0.0)
     assert np.all(np.isfinite(ev.closure_residual)) or np.all(~np.isnan(ev.closure_residual))
-    reference = make(four_bar(ground=0.9, active=('joint1',), init=[1.2, -1.0, 1.9, 1.0]))
+    reference = make(four_bar(ground=0.9, active=('joint1',), init=[1.2, -1.2332, 2.0244, 2.0575]))
     assert np.allclose(ev.torques[ev.valid], reference.torques(q[ev.valid]), atol=1e-10)
     with pytest.raises(cog_id_ros.ClosureError) as info:
         s.torques(q[:3])
@@ -109,7 +109,7 @@ def test_the_loops_never_wrap_angles_and_batch_equals_per_sample():
 
 def test_each_assembly_mode_is_kept_along_the_motion_and_across_calls():
     open_mode = make(four_bar(ground=0.6, crank=0.2, coupler=0.6, rocker=0.4, active=('joint1',),
-                              init=[1.0, -0.5, 2.0, 0.5]))
+                              init=[1.0, -0.6127, 1.4111, 1.0238]))
     crossed = make(four_bar(ground=0.6, crank=0.2, coupler=0.6, rocker=0.4, active=('joint1',),
                             init=[1.0, -2.0465, -2.0703, -1.0238]))
     crank = np.linspace(1.0, 1.0 + 4 * np.pi, 400)[:, None]    # two full turns

@@ -284,7 +284,8 @@ def test_a_chain_near_its_lock_at_load_is_named_in_the_error():
     says to write it as one spherical joint."""
     p = wrist(True)
     p['mechanism.initial_positions'] = [0.0, 1.5706, 0.0] + _wrist_legs(1.5706)
-    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info, \
+            pytest.warns(cog_id_ros.AssemblyWarning, match='moved passive joint'):
         cog_id_ros.Mechanism.from_parameters(p)
     assert 'ball_x, ball_y, ball_z' in str(info.value) and 'gimbal lock' in str(info.value)
     assert '`type: spherical`' in str(info.value)

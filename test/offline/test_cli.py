@@ -377,6 +377,7 @@ def test_progress_bar_on_a_terminal_only(tmp_path):
                 break
             chunks.append(data)
         proc.stdout.read()
+        proc.stdout.close()
         assert proc.wait(timeout=300) == 0
     finally:
         os.close(master)

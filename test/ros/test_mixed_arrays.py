@@ -5,6 +5,7 @@ its files first and names the parameter. ``cog_id_ros.params_file`` holds the on
 (``rcl_value_problem``), so ``Mechanism.from_params_file`` refuses the same files with
 the same message, while a dict given to ``Mechanism.from_parameters`` may mix freely.
 """
+import pathlib
 import signal
 import subprocess
 import sys
@@ -22,7 +23,7 @@ MIXED = 'the array mixes integers and doubles ([0, -9.81, 0])'
 
 def mixed_file(tmp_path, old='gravity: [0.0, -9.81, 0.0]', new='gravity: [0, -9.81, 0]',
                name='mixed.yaml'):
-    text = open(f'{REPO}/{CONFIG_A}', encoding='utf-8').read()
+    text = pathlib.Path(f'{REPO}/{CONFIG_A}').read_text(encoding='utf-8')
     assert old in text
     path = tmp_path / name
     path.write_text(text.replace(old, new))
@@ -82,7 +83,7 @@ def test_floats_without_a_dot_are_doubles_as_rcl_reads_them(tmp_path):
 def test_another_nodes_entry_counts_too(tmp_path):
     """rcl refuses the whole file, whichever node an entry is for."""
     path = tmp_path / 'two_nodes.yaml'
-    path.write_text(open(f'{REPO}/{CONFIG_A}', encoding='utf-8').read() +
+    path.write_text(pathlib.Path(f'{REPO}/{CONFIG_A}').read_text(encoding='utf-8') +
                     'other_node:\n  ros__parameters:\n    offsets: [1, 2.5]\n')
     error = api_error(str(path))
     assert error.parameter == 'offsets' and 'mixes integers and doubles' in str(error)

@@ -134,7 +134,7 @@ NON_GRASHOF = """
       links: [link1, link2, link3]
       joints: [joint1, joint2, joint3, joint4]
       active_joints: [joint1]
-      initial_positions: [0.5, 1.4, 2.2, 0.0]
+      initial_positions: [0.5, 3.3166, 2.9666, -0.85]
     links:
       link1: {mass: 1.0, com: [0.25, 0.0, 0.0], inertia: [0.0, 0.02, 0.02, 0.0, 0.0, 0.0]}
       link2: {mass: 1.0, com: [0.15, 0.0, 0.0], inertia: [0.0, 0.01, 0.01, 0.0, 0.0, 0.0]}

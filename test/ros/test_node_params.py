@@ -3,6 +3,7 @@
 A bad file ends the process with exit status 2 and one line naming the parameter; a good
 one starts the node, which exits with status 0 on SIGINT or SIGTERM.
 """
+import pathlib
 import signal
 import subprocess
 import sys
@@ -125,7 +126,7 @@ def test_empty_effort_limits_means_no_limit(tmp_path, ros_env):
 def test_a_params_file_rcl_cannot_parse_is_one_line_naming_the_parameter(tmp_path, ros_env):
     """Reliability item 22: rcl's parse error printed two lines naming a line of the file;
     now one line names the parameter and the file."""
-    text = open(CONFIG_A, encoding='utf-8').read()
+    text = pathlib.Path(CONFIG_A).read_text(encoding='utf-8')
     path = tmp_path / 'mixed.yaml'
     path.write_text(text.replace('gravity: [0.0, -9.81, 0.0]', 'gravity: [0, -9.81, 0]'))
     assert 'gravity: [0, -9.81, 0]' in path.read_text()
@@ -224,7 +225,7 @@ def test_an_rcl_parse_error_the_node_cannot_foresee_names_the_parameter_at_its_l
         tmp_path, ros_env):
     """Reliability item 22: a key without a value ('No value at line N' from rcl) gave two
     lines naming a line; now one line names the parameter at that line, and the file."""
-    text = open(CONFIG_A, encoding='utf-8').read()
+    text = pathlib.Path(CONFIG_A).read_text(encoding='utf-8')
     path = tmp_path / 'novalue.yaml'
     path.write_text(text.replace('      name: paper_four_bar_a\n', '      name:\n'))
     assert '      name:\n' in path.read_text()

@@ -7,6 +7,7 @@ of their own; a probe node in this process talks to them over DDS. Waits are gen
 upper bounds, never reached when things work.
 """
 import os
+import pathlib
 import signal
 import subprocess
 import sys
@@ -157,7 +158,7 @@ def test_a_stopped_trajectory_process_is_killed_and_replaced(ros_process, probe_
     assert kv['trajectory_in_progress'] == 'false', kv
     assert 'did not answer the trajectory within' in proc.output, proc.output
     assert wait_until(lambda: all(not os.path.exists(f'/proc/{pid}') or
-                                  open(f'/proc/{pid}/stat').read().split()[2] == 'Z'
+                                  pathlib.Path(f'/proc/{pid}/stat').read_text().split()[2] == 'Z'
                                   for pid in stopped), 10), 'the stopped process lives on'
     probe.trajectories.publish(make_trajectory(['joint3'], q[:3], q[:3] * 0, q[:3] * 0))
     assert wait_until(lambda: len(probe.effort_trajectories) == 2, timeout=90), proc.output
@@ -188,7 +189,7 @@ def test_sigint_during_a_hung_compile_stops_the_node_at_once(ros_process, tmp_pa
     assert 'Traceback' not in proc.output, proc.output
     for pid in map(int, pids.read_text().split()):
         assert wait_until(lambda: not os.path.exists(f'/proc/{pid}') or
-                          open(f'/proc/{pid}/stat').read().split()[2] == 'Z', 5), \
+                          pathlib.Path(f'/proc/{pid}/stat').read_text().split()[2] == 'Z', 5), \
             f'compiler {pid} left running'
 
 
