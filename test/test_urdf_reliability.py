@@ -14,8 +14,8 @@ from test_urdf_input import CONFIG, four_bar_urdf, four_bar_urdf_params, inertia
 import yaml
 
 from cog_id_ros import Mechanism, MechanismConfigError
-from cog_id_ros.params_file import MAX_FILE_CHARS, load_params_file, read_document
-from cog_id_ros.urdf_input import MAX_URDF_SIZE, native_parameters
+from cog_id_ros.description.params_file import MAX_FILE_CHARS, load_params_file, read_document
+from cog_id_ros.description.urdf import MAX_URDF_SIZE, native_parameters
 
 
 def refused(params, base_dir=None):

@@ -140,8 +140,8 @@ class Mechanism:
                                        f'must be a dict, got {type(params).__name__}')
         flat = ParameterReader(params).params
         if 'robot_description' in flat or 'mechanism.urdf_file' in flat:
-            from .. import urdf_input
-            return cls(urdf_input.native_parameters(flat, base_dir))
+            from ..description import urdf
+            return cls(urdf.native_parameters(flat, base_dir))
         return cls(params)
 
     @classmethod
@@ -153,7 +153,7 @@ class Mechanism:
         the core); ``node_name`` is the node's name, ``cog_id_node`` (a test checks it is
         params_file.DEFAULT_NODE_NAME). A relative ``mechanism.urdf_file`` is relative to
         the file's directory."""
-        from ..params_file import load_params_file
+        from ..description.params_file import load_params_file
         return cls.from_parameters(load_params_file(path, node_name),
                                    base_dir=os.path.dirname(os.path.abspath(path)))
 

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros import MechanismConfigError, params_file
+from cog_id_ros import MechanismConfigError
+from cog_id_ros.description import params_file
 
 CONFIG_A = 'config/paper_four_bar_a.yaml'
 MIXED = 'the array mixes integers and doubles ([0, -9.81, 0])'

@@ -47,8 +47,8 @@ from xml.parsers import expat
 
 import numpy as np
 
-from .core.errors import MechanismConfigError
-from .core.mechanism import (
+from ..core.errors import MechanismConfigError
+from ..core.mechanism import (
     MAX_COORDINATE,
     MAX_INERTIA,
     MAX_LENGTH,
@@ -57,7 +57,7 @@ from .core.mechanism import (
     bounded,
     inertia_problem,
 )
-from .core.parameters import ParameterReader, as_float, show
+from ..core.parameters import ParameterReader, as_float, show
 
 #: the joint types of ``loop_closures.<name>.type`` (those of the native schema)
 CLOSURE_TYPES = ('revolute', 'prismatic', 'spherical', 'universal', 'fixed')

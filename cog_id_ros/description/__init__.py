@@ -1,0 +1,1 @@
+"""Descriptions of mechanisms: the files and formats a mechanism is read from."""
