@@ -33,8 +33,8 @@ from cog_id_ros import AssemblyWarning, InverseDynamics, Mechanism
 from cog_id_ros.core import kinematics as kin
 from cog_id_ros.core import spatial as sp
 from cog_id_ros.core.kinematics import BASE
+from cog_id_ros.description.frames import rpy_matrix, rpy_of
 from cog_id_ros.description.params_file import load_params_file
-from cog_id_ros.description.urdf import rpy_matrix, rpy_of
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CONFIG = os.path.join(os.path.dirname(HERE), 'config')

@@ -13,8 +13,9 @@ import pytest
 
 import cog_id_ros
 from cog_id_ros import Mechanism, MechanismConfigError
+from cog_id_ros.description.frames import rpy_matrix, rpy_of
 from cog_id_ros.description.params_file import load_params_file
-from cog_id_ros.description.urdf import is_urdf, native_parameters, rpy_matrix, rpy_of
+from cog_id_ros.description.urdf import is_urdf, native_parameters
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(REPO, 'config')

@@ -15,7 +15,8 @@ import yaml
 
 from cog_id_ros import Mechanism, MechanismConfigError
 from cog_id_ros.description.params_file import MAX_FILE_CHARS, load_params_file, read_document
-from cog_id_ros.description.urdf import MAX_URDF_SIZE, native_parameters
+from cog_id_ros.description.urdf import native_parameters
+from cog_id_ros.description.urdf_xml import MAX_URDF_SIZE
 
 
 def refused(params, base_dir=None):

@@ -28,7 +28,7 @@ import yaml
 
 from ..core.errors import MechanismConfigError
 from ..core.parameters import flatten, show
-from .urdf import MAX_URDF_SIZE
+from .urdf_xml import MAX_URDF_SIZE
 
 #: the node entry read when none is named (the node's default name)
 DEFAULT_NODE_NAME = 'cog_id_node'
