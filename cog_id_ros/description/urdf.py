@@ -6,8 +6,9 @@ URDF as a string, or ``mechanism.urdf_file``) and the loop-closing joints as
 ``loop_closures.<name>.*``, listed in ``mechanism.loop_closures``. :func:`native_parameters`
 turns that into the native dotted names the core reads (README, "Mechanism parameter file"):
 ``mechanism.links``, ``mechanism.joints``, ``links.<l>.*``, ``joints.<j>.*`` and a list of
-``mechanism.initial_positions``. File formats stay out of :mod:`cog_id_ros.core`; the core
-calls this module when it is handed the URDF form.
+``mechanism.initial_positions``. File formats stay out of :mod:`cog_id_ros.core`:
+``cog_id_ros.Mechanism.from_parameters`` (:mod:`.mechanism`) calls this module when it is
+handed the URDF form, and hands the core what it returns.
 
 Conventions (URDF's): a joint's ``<origin>`` places the joint frame in the parent link's
 frame and the child link's frame is the joint frame; ``<axis>`` is in the joint frame and
