@@ -15,7 +15,7 @@ January 2026, a 22 kB wheel needing lxml and trimesh[easy], i.e. mesh handling a
 dependencies) would each add pinned dependencies to requirements.txt for what the standard
 library does, neither reports line numbers for its semantic errors, and both are lenient in
 ways that hide mistakes (missing attributes become defaults). Pinocchio's own URDF parser
-(urdfdom) is the independent reference of the tests (test/test_urdf_input.py), never the
+(urdfdom) is the independent reference of the tests (test/description/test_urdf.py), never the
 runtime reader.
 """
 import os

@@ -1,7 +1,7 @@
 """Arrays rcl's parameter-file parser refuses are refused alike by cog_id_node and the API.
 
 rcl refuses ``gravity: [0, -9.81, 0]`` (integers and doubles in one array); the node reads
-its files first and names the parameter. ``cog_id_ros.params_file`` holds the one rule
+its files first and names the parameter. ``cog_id_ros.description.params_file`` holds the one rule
 (``rcl_value_problem``), so ``Mechanism.from_params_file`` refuses the same files with
 the same message, while a dict given to ``Mechanism.from_parameters`` may mix freely.
 """
