@@ -11,11 +11,11 @@ from .core import (
     CogIdError,
     Evaluation,
     InverseDynamics,
-    Mechanism,
     MechanismConfigError,
     SetpointError,
     SingularConfigurationError,
 )
+from .description import Mechanism
 
 __version__ = '0.1.0'
 __all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',

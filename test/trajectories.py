@@ -284,6 +284,6 @@ TWINS = {'stewart_6ups_spherical.yaml': STEWART, 'delta_3rus_spherical.yaml': DE
 for _twin, _original in TWINS.items():
     TRAJECTORIES[_twin] = TRAJECTORIES[_original]
 
-#: configs the oracle cannot read: the twins, and URDF descriptions (test/test_urdf_input.py
-#: checks those against Pinocchio's own URDF parser)
+#: configs the oracle cannot read: the twins, and URDF descriptions
+#: (test/description/test_urdf.py checks those against Pinocchio's own URDF parser)
 NOT_FOR_ORACLE = set(TWINS) | {'crank_rocker_urdf.yaml'}

@@ -1,9 +1,11 @@
 """Mechanism: a validated description of links, joints and actuators, ready to solve.
 
-Built from a ROS 2 parameter file (``from_params_file``; README, "Mechanism parameter
-file", and docs/mechanism.md for the limits and defaults) or from the dotted names rclpy
-gives a node (``from_parameters``). Everything a user can get wrong raises
-MechanismConfigError naming the parameter. At load the mechanism is assembled near
+Built from the native parameters (README, "Mechanism parameter file", and
+docs/mechanism.md for the limits and defaults): the dotted names rclpy gives a node, or a
+nested dict. Files and other forms are read outside the core: ``cog_id_ros.Mechanism``
+(:mod:`cog_id_ros.description.mechanism`) is this class with ``from_params_file`` and
+``from_parameters``. Everything a user can get wrong raises MechanismConfigError naming the
+parameter. At load the mechanism is assembled near
 ``initial_positions`` (actuators held), its degrees of freedom are read off the rank of the
 closure Jacobian there, and the actuators are checked to determine the motion. What the
 assembly had to change is reported in ``assembly_warnings`` (and as AssemblyWarning).
@@ -14,7 +16,6 @@ friends) so that finite, moderate setpoints never produce an infinite torque.
 """
 import itertools
 import math
-import os
 import re
 import warnings
 
@@ -126,36 +127,6 @@ class Mechanism:
                 f'from the mechanism as it was read. Change the parameters and build a new '
                 f'one with Mechanism.from_parameters')
         object.__setattr__(self, name, value)
-
-    @classmethod
-    def from_parameters(cls, params: dict, base_dir: 'str | None' = None) -> 'Mechanism':
-        """From a dict of dotted parameter names (as rclpy gives them) or a nested dict.
-
-        A URDF form (``robot_description`` or ``mechanism.urdf_file`` with loop closures,
-        docs/urdf.md) is first turned into the native form by :mod:`cog_id_ros.urdf_input`
-        (file formats live outside the core); ``base_dir`` is where a relative
-        ``mechanism.urdf_file`` is looked for (default: the working directory)."""
-        if not isinstance(params, dict):
-            raise MechanismConfigError('parameters',
-                                       f'must be a dict, got {type(params).__name__}')
-        flat = ParameterReader(params).params
-        if 'robot_description' in flat or 'mechanism.urdf_file' in flat:
-            from .. import urdf_input
-            return cls(urdf_input.native_parameters(flat, base_dir))
-        return cls(params)
-
-    @classmethod
-    def from_params_file(cls, path: 'str | os.PathLike', node_name: str = 'cog_id_node'
-                         ) -> 'Mechanism':
-        """From a ROS 2 parameter file (node entry ``node_name`` or ``/**``).
-
-        The file is read by :mod:`cog_id_ros.params_file` (the ROS conventions live outside
-        the core); ``node_name`` is the node's name, ``cog_id_node`` (a test checks it is
-        params_file.DEFAULT_NODE_NAME). A relative ``mechanism.urdf_file`` is relative to
-        the file's directory."""
-        from ..params_file import load_params_file
-        return cls.from_parameters(load_params_file(path, node_name),
-                                   base_dir=os.path.dirname(os.path.abspath(path)))
 
     # --- reading ----------------------------------------------------------------------------
 
@@ -686,7 +657,7 @@ def _inertia_matrix(values):
 def inertia_problem(values):
     """What makes ``values`` (6 entries [ixx, iyy, izz, ixy, ixz, iyz], or 9 row by row,
     finite) no rigid body's inertia, as a message, or None. One test for the native
-    ``links.<l>.inertia`` and for the URDF's ``<inertia>`` (urdf_input.py), so that both
+    ``links.<l>.inertia`` and for the URDF's ``<inertia>`` (description/urdf_tree.py), so that both
     accept the same tensors."""
     matrix = _inertia_matrix(values)
     largest = float(np.abs(matrix).max())
@@ -737,7 +708,8 @@ def _condition_number(a):
 
 def bounded(name, values, bound, unit):
     """values unchanged, or MechanismConfigError if an entry exceeds +-bound. Also applied by
-    urdf_input.py to the loop closures' offsets as written, in the same words."""
+    description/loop_closures.py to the loop closures' offsets as written, in the same
+    words."""
     for k, x in enumerate(values):
         if abs(x) > bound:
             raise MechanismConfigError(

@@ -2,7 +2,7 @@
 
 The names are the ones rclpy gives a node (``links.link1.mass``); nested mappings are
 flattened to them. Files are not read here: the ROS parameter-file reader is
-:mod:`cog_id_ros.params_file`, which hands this module the same dict.
+:mod:`cog_id_ros.description.params_file`, which hands this module the same dict.
 
 The typed getters below turn anything a user can write (YAML integers where floats are
 meant, tuples, numpy arrays) into plain Python values, and raise MechanismConfigError naming

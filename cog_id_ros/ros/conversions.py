@@ -363,7 +363,8 @@ def trajectory_process(conn, config):
     """
     import signal
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from ..core import InverseDynamics, Mechanism
+    from ..core import InverseDynamics
+    from ..description import Mechanism
     solver = InverseDynamics(Mechanism.from_parameters(config['mechanism']),
                              backend=config.get('backend', 'auto'))
     selector = JointSelector(config['active_joints'])

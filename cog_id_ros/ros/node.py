@@ -76,8 +76,8 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 import yaml
 
-from .. import params_file
-from ..core import CogIdError, InverseDynamics, Mechanism, MechanismConfigError
+from ..core import CogIdError, InverseDynamics, MechanismConfigError
+from ..description import Mechanism, params_file
 from . import stop_signals
 from .conversions import (
     NANOSECONDS,

@@ -13,7 +13,7 @@ import pytest
 from trajectories import TWINS, config_path, sample
 
 import cog_id_ros
-from cog_id_ros.params_file import load_params_file
+from cog_id_ros.description.params_file import load_params_file
 
 BACKENDS = ('reference', 'python')
 

@@ -58,7 +58,7 @@ from hypothesis.extra import numpy as hnp  # noqa: E402
 
 import cog_id_ros  # noqa: E402
 from cog_id_ros import CogIdError, MechanismConfigError  # noqa: E402
-from cog_id_ros.params_file import load_params_file  # noqa: E402
+from cog_id_ros.description.params_file import load_params_file  # noqa: E402
 
 try:
     from cog_id_ros.core.errors import REASONS as CORE_REASONS

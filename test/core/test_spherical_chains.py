@@ -11,7 +11,7 @@ from trajectories import config_path, sample
 import cog_id_ros
 from cog_id_ros.core import spatial as sp
 from cog_id_ros.core import spherical_chains
-from cog_id_ros.params_file import load_params_file
+from cog_id_ros.description.params_file import load_params_file
 
 BACKENDS = ('reference', 'python', 'native')
 

@@ -1,7 +1,7 @@
 """Arrays rcl's parameter-file parser refuses are refused alike by cog_id_node and the API.
 
 rcl refuses ``gravity: [0, -9.81, 0]`` (integers and doubles in one array); the node reads
-its files first and names the parameter. ``cog_id_ros.params_file`` holds the one rule
+its files first and names the parameter. ``cog_id_ros.description.params_file`` holds the one rule
 (``rcl_value_problem``), so ``Mechanism.from_params_file`` refuses the same files with
 the same message, while a dict given to ``Mechanism.from_parameters`` may mix freely.
 """
@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros import MechanismConfigError, params_file
+from cog_id_ros import MechanismConfigError
+from cog_id_ros.description import params_file
 
 CONFIG_A = 'config/paper_four_bar_a.yaml'
 MIXED = 'the array mixes integers and doubles ([0, -9.81, 0])'

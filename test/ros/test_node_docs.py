@@ -6,7 +6,8 @@ import os
 
 import pytest
 
-from cog_id_ros import Mechanism, MechanismConfigError, params_file
+from cog_id_ros import Mechanism, MechanismConfigError
+from cog_id_ros.description import params_file
 from cog_id_ros.ros import parameters, topics
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

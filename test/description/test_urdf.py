@@ -1,4 +1,5 @@
-"""A URDF plus loop closures as mechanism parameters (cog_id_ros.urdf_input, docs/urdf.md).
+"""A URDF plus loop closures as mechanism parameters (cog_id_ros.description.urdf,
+docs/urdf.md).
 
 The references are independent of the converter: Pinocchio's own URDF parser (urdfdom) and
 RNEA for open chains read from the same URDF text; for closed loops, the same mechanism
@@ -8,15 +9,16 @@ the principle of virtual work (the loop's constraint forces do no work along the
 import math
 import os
 
+from conftest import REPO
 import numpy as np
 import pytest
 
 import cog_id_ros
 from cog_id_ros import Mechanism, MechanismConfigError
-from cog_id_ros.params_file import load_params_file
-from cog_id_ros.urdf_input import is_urdf, native_parameters, rpy_matrix, rpy_of
+from cog_id_ros.description.frames import rpy_matrix, rpy_of
+from cog_id_ros.description.params_file import load_params_file
+from cog_id_ros.description.urdf import is_urdf, native_parameters
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(REPO, 'config')
 
 INERTIA = 'ixx="{}" ixy="{}" ixz="{}" iyy="{}" iyz="{}" izz="{}"'

@@ -26,16 +26,16 @@ import stat
 
 import yaml
 
-from .core.errors import MechanismConfigError
-from .core.parameters import flatten, show
-from .urdf_input import MAX_URDF_SIZE
+from ..core.errors import MechanismConfigError
+from ..core.parameters import flatten, show
+from .urdf_xml import MAX_URDF_SIZE
 
 #: the node entry read when none is named (the node's default name)
 DEFAULT_NODE_NAME = 'cog_id_node'
 
 #: largest parameter file read (characters), not counting the values of its
 #: robot_description parameters: a URDF has one limit however it arrives, the URDF reader's
-#: (urdf_input.MAX_URDF_SIZE). A mechanism within the size limits of mechanism.py takes well
+#: (urdf_xml.MAX_URDF_SIZE). A mechanism within the size limits of mechanism.py takes well
 #: under 100 kB, and 512 kB of YAML load in about 1.5 s on a small machine (what costs is
 #: YAML's structure: a long string is read in no time)
 MAX_FILE_CHARS = 512 * 1024

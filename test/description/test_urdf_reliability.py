@@ -1,6 +1,6 @@
-"""Reliability 2, items 9 and 10: what the URDF reader (cog_id_ros.urdf_input) and the
-parameter-file reader (cog_id_ros.params_file) say about values, numbers, text and sizes
-they cannot take (docs/urdf.md, "Errors" and "The parser").
+"""Reliability 2, items 9 and 10: what the URDF reader (cog_id_ros.description.urdf) and the
+parameter-file reader (cog_id_ros.description.params_file) say about values, numbers, text
+and sizes they cannot take (docs/urdf.md, "Errors" and "The parser").
 
 Every load here runs with warnings turned into errors: a value out of bounds must be named
 at the URDF element it was written in before any arithmetic on it, never after a numpy
@@ -10,12 +10,13 @@ import os
 import warnings
 
 import pytest
-from test_urdf_input import CONFIG, four_bar_urdf, four_bar_urdf_params, inertial
+from test_urdf import CONFIG, four_bar_urdf, four_bar_urdf_params, inertial
 import yaml
 
 from cog_id_ros import Mechanism, MechanismConfigError
-from cog_id_ros.params_file import MAX_FILE_CHARS, load_params_file, read_document
-from cog_id_ros.urdf_input import MAX_URDF_SIZE, native_parameters
+from cog_id_ros.description.params_file import MAX_FILE_CHARS, load_params_file, read_document
+from cog_id_ros.description.urdf import native_parameters
+from cog_id_ros.description.urdf_xml import MAX_URDF_SIZE
 
 
 def refused(params, base_dir=None):

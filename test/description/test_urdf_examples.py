@@ -15,7 +15,7 @@ attachments), so ``T_C A = T_P B M(axis, -q) = T_P B M(-axis, q)``. The URDF joi
 C therefore has its origin at B (in P's new frame), the child frame ``T_C A`` and the axis
 negated: its coordinate is ours, with the same sign, limits and initial position.
 
-The URDF form is read back by ``Mechanism.from_parameters`` (cog_id_ros.urdf_input) and must
+The URDF form is read back by ``Mechanism.from_parameters`` (cog_id_ros.description.urdf) and must
 give the native file's torques along the config's test motion (test/trajectories.py) to
 1e-12 of the largest torque, and the same joint positions (mapped by name: the URDF form
 lists its joints in document order, then the closures).
@@ -23,25 +23,21 @@ lists its joints in document order, then the closures).
 import glob
 import math
 import os
-import sys
 import warnings
 
+from conftest import REPO
 import numpy as np
 import pytest
+import trajectories
 
 from cog_id_ros import AssemblyWarning, InverseDynamics, Mechanism
 from cog_id_ros.core import kinematics as kin
 from cog_id_ros.core import spatial as sp
 from cog_id_ros.core.kinematics import BASE
-from cog_id_ros.params_file import load_params_file
-from cog_id_ros.urdf_input import rpy_matrix, rpy_of
+from cog_id_ros.description.frames import rpy_matrix, rpy_of
+from cog_id_ros.description.params_file import load_params_file
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-CONFIG = os.path.join(os.path.dirname(HERE), 'config')
-if HERE not in sys.path:
-    sys.path.insert(0, HERE)
-
-import trajectories  # noqa: E402
+CONFIG = os.path.join(REPO, 'config')
 
 #: max |tau_urdf - tau_native| / max |tau_native| along the motion
 TORQUE_TOLERANCE = 1e-12
@@ -263,7 +259,7 @@ def test_every_native_example_is_exported():
 
 @pytest.mark.parametrize('config', native_configs())
 def test_urdfdom_reads_the_exported_urdf_as_the_same_bodies(config):
-    """Independent of cog_id_ros.urdf_input: Pinocchio's URDF parser (urdfdom) reads the
+    """Independent of cog_id_ros.description.urdf: Pinocchio's URDF parser (urdfdom) reads the
     exported tree; at the native solver's joint positions every link with mass has the
     native COG and inertia in the base frame, and every loop closure's two frames meet."""
     pin = pytest.importorskip('pinocchio')

@@ -1,0 +1,114 @@
+"""The joints that close a tree's loops, as the URDF form gives them (docs/urdf.md):
+``mechanism.loop_closures`` lists their names, ``loop_closures.<name>.*`` gives each one's
+type, the links it joins, where it sits on each and its axes."""
+import math
+
+from ..core.errors import MechanismConfigError
+from ..core.mechanism import AXES_PERPENDICULAR, MAX_COORDINATE, MAX_LENGTH, NAME_PATTERN, bounded
+from ..core.parameters import show
+from .frames import ZERO
+
+#: the joint types of ``loop_closures.<name>.type`` (those of the native schema)
+CLOSURE_TYPES = ('revolute', 'prismatic', 'spherical', 'universal', 'fixed')
+#: the keys of ``loop_closures.<name>.*``
+CLOSURE_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz',
+                'child_rpy', 'axis', 'axis2')
+
+
+class _Closure:
+    def __init__(self, name, kind, parent, child, offsets, axis, axis2):
+        self.name, self.kind, self.parent, self.child = name, kind, parent, child
+        self.offsets = offsets           # parent_xyz, parent_rpy, child_xyz, child_rpy
+        self.axis, self.axis2 = axis, axis2
+
+
+def read_closures(r, robot):
+    """The loop closures ``mechanism.loop_closures`` lists (parameters read by ``r``), each
+    checked against the links and joints of the URDF ``robot``."""
+    names = r.string_list('mechanism.loop_closures') or []
+    for name in names:
+        if not NAME_PATTERN.match(name):
+            raise MechanismConfigError(
+                'mechanism.loop_closures',
+                f"'{name}' is not a valid joint name: names become parts of ROS 2 parameter "
+                f"names (loop_closures.<name>.*, joints.<name>.*) and may hold only letters, "
+                f"digits and '_', not starting with a digit")
+        if name in robot.joints:
+            raise MechanismConfigError(
+                'mechanism.loop_closures',
+                f"'{name}' is already a joint of the URDF (line {robot.joints[name].line}); "
+                f'give the loop closure a name of its own')
+    listed = set(names)
+    for key in r.params:
+        if key == 'loop_closures':
+            value = r.params[key]
+            if isinstance(value, dict) and not value and not names:
+                continue
+            raise MechanismConfigError(
+                key, f'must map closure names to their keys ({", ".join(CLOSURE_KEYS)}), '
+                     f'got {show(value)}')
+        if not key.startswith('loop_closures.'):
+            continue
+        parts = key.split('.', 2)
+        if parts[1] not in listed:
+            raise MechanismConfigError(
+                key, f"'{parts[1]}' is not in mechanism.loop_closures "
+                     f"({', '.join(names) if names else 'none listed'}): list it there, or "
+                     f'correct the name')
+        if len(parts) < 3 or parts[2] not in CLOSURE_KEYS:
+            raise MechanismConfigError(
+                key, f"unknown parameter (loop_closures.{parts[1]}.* takes "
+                     f"{', '.join(CLOSURE_KEYS)})")
+    return [_read_closure(r, robot, name) for name in names]
+
+
+def _read_closure(r, robot, name):
+    prefix = f'loop_closures.{name}.'
+    kind = r.string(prefix + 'type', required=True)
+    if kind not in CLOSURE_TYPES:
+        raise MechanismConfigError(
+            prefix + 'type', f"must be one of {', '.join(CLOSURE_TYPES)}, got {show(kind)}")
+    ends = []
+    for side in ('parent', 'child'):
+        link = r.string(prefix + side, required=True)
+        if link not in robot.links:
+            known = list(robot.links)
+            listed = ', '.join(known[:12]) + (', ...' if len(known) > 12 else '')
+            raise MechanismConfigError(
+                prefix + side, f"unknown link '{link}' (not a link of the URDF: {listed})")
+        ends.append(link)
+    # bounded as written, as the core would bound them: on a link welded to another they
+    # reach the core re-expressed (an rpy of 1e300 as an angle within +-pi), under joints.*
+    offsets = tuple(bounded(prefix + key, r.vector(prefix + key, 3, default=ZERO), bound, unit)
+                    for key, bound, unit in (('parent_xyz', MAX_LENGTH, 'm'),
+                                             ('parent_rpy', MAX_COORDINATE, 'rad'),
+                                             ('child_xyz', MAX_LENGTH, 'm'),
+                                             ('child_rpy', MAX_COORDINATE, 'rad')))
+    axis = axis2 = None
+    if kind in ('revolute', 'prismatic', 'universal'):
+        axis = _axis(r, prefix + 'axis', (0.0, 0.0, 1.0))
+    elif r.has(prefix + 'axis'):
+        raise MechanismConfigError(prefix + 'axis', f'a {kind} closure has no axis; delete it')
+    if kind == 'universal':
+        if not r.has(prefix + 'axis2'):
+            raise MechanismConfigError(
+                prefix + 'axis2', 'missing: a universal closure needs axis2, its second axis '
+                                  'in the child closure frame, perpendicular to axis')
+        axis2 = _axis(r, prefix + 'axis2', None)
+        cosine = abs(sum(a * b for a, b in zip(axis, axis2))) / (
+            math.hypot(*axis) * math.hypot(*axis2))
+        if cosine > AXES_PERPENDICULAR:
+            raise MechanismConfigError(
+                prefix + 'axis2', f'must be perpendicular to axis {list(axis)} (a universal '
+                                  f'joint keeps its two axes perpendicular), got {list(axis2)}')
+    elif r.has(prefix + 'axis2'):
+        raise MechanismConfigError(
+            prefix + 'axis2', f'only universal closures have axis2, this one is {kind}')
+    return _Closure(name, kind, ends[0], ends[1], offsets, axis, axis2)
+
+
+def _axis(r, name, default):
+    axis = r.vector(name, 3, default=default, required=default is None)
+    if not math.hypot(*axis) > 0.0:
+        raise MechanismConfigError(name, f'must not be zero-length, got {list(axis)}')
+    return axis

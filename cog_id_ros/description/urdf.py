@@ -1,0 +1,230 @@
+"""A URDF plus loop closures, read into the native mechanism parameters (docs/urdf.md).
+
+URDF describes a tree; a closed-link mechanism is that tree plus the joints that close its
+loops. The URDF form of the parameters gives the tree as a URDF (``robot_description``, the
+URDF as a string, or ``mechanism.urdf_file``) and the loop-closing joints as
+``loop_closures.<name>.*``, listed in ``mechanism.loop_closures``. :func:`native_parameters`
+turns that into the native dotted names the core reads (README, "Mechanism parameter file"):
+``mechanism.links``, ``mechanism.joints``, ``links.<l>.*``, ``joints.<j>.*`` and a list of
+``mechanism.initial_positions``. File formats stay out of :mod:`cog_id_ros.core`:
+``cog_id_ros.Mechanism.from_parameters`` (:mod:`.mechanism`) calls this module when it is
+handed the URDF form, and hands the core what it returns.
+
+Conventions (URDF's): a joint's ``<origin>`` places the joint frame in the parent link's
+frame and the child link's frame is the joint frame; ``<axis>`` is in the joint frame and
+defaults to x; ``<inertial>`` gives the mass, the COG and the inertia about the COG in the
+frame of its ``<origin>`` (rotated into the link frame here: R I R^T). Fixed joints weld
+their two links into one rigid body (mass, COG and inertia combined with the parallel-axis
+theorem, in the frame of the link that survives); every joint, closure and base link that
+refers to a merged link is re-expressed in the survivor's frame. ``continuous`` joints are
+revolute joints without position limits; ``floating`` and ``planar`` joints (more than one
+coordinate) and ``mimic`` (a coupling the core does not model) are refused naming the joint.
+``<dynamics>``, ``<safety_controller>``, ``<calibration>``, ``<visual>``, ``<collision>``,
+``<transmission>``, ``<gazebo>`` and ``<material>`` are ignored.
+
+Every error is a MechanismConfigError naming the parameter (``robot_description``,
+``mechanism.urdf_file``, ``loop_closures.<name>.<key>``, ``mechanism.active_joints``, ...);
+errors inside the URDF give its line and name the link or joint.
+"""
+from ..core.errors import MechanismConfigError
+from ..core.mechanism import NAME_PATTERN
+from ..core.parameters import ParameterReader, as_float, show
+from .frames import ZERO
+from .loop_closures import read_closures
+from .rigid_bodies import mass_properties, merge_fixed, six
+from .urdf_tree import Robot
+from .urdf_xml import read_source
+
+#: parameters the URDF form consumes (everything else under mechanism.* passes through)
+_CONSUMED = ('robot_description', 'mechanism.urdf_file', 'mechanism.loop_closures',
+             'mechanism.base_link', 'mechanism.initial_positions')
+
+
+def is_urdf(params: dict) -> bool:
+    """True when ``params`` (dotted names, or a nested dict) is in the URDF form: it holds
+    ``robot_description`` or ``mechanism.urdf_file``."""
+    if not isinstance(params, dict):
+        return False
+    if 'robot_description' in params or 'mechanism.urdf_file' in params:
+        return True
+    nested = params.get('mechanism')
+    return isinstance(nested, dict) and 'urdf_file' in nested
+
+
+def native_parameters(params: dict, base_dir: 'str | None' = None) -> dict:
+    """The native dotted-name parameters of the mechanism that ``params`` gives in the URDF
+    form (docs/urdf.md).
+
+    ``params`` holds dotted names (as rclpy gives them) or a nested dict; ``base_dir`` is
+    where a relative ``mechanism.urdf_file`` is looked for (the params file's directory;
+    default: the working directory). Every ``mechanism.*`` parameter that the URDF form does
+    not define passes through unchanged (``name``, ``gravity``, ``active_joints``,
+    ``torque_weights``, the tolerances), and so does every parameter outside the
+    mechanism's (a node's own). Raises MechanismConfigError naming the parameter."""
+    if not isinstance(params, dict):
+        raise MechanismConfigError('parameters', f'must be a dict, got {type(params).__name__}')
+    r = ParameterReader(params)
+    flat = r.params
+    for name in ('mechanism.links', 'mechanism.joints'):
+        if name in flat:
+            raise MechanismConfigError(
+                name, 'must not be given with a URDF (robot_description or '
+                      'mechanism.urdf_file): the links and joints come from the URDF, and the '
+                      'joints that close loops from mechanism.loop_closures')
+    for name in flat:
+        if name.startswith(('links.', 'joints.')):
+            raise MechanismConfigError(
+                name, 'links.* and joints.* are not read with a URDF (robot_description or '
+                      "mechanism.urdf_file): give masses and inertias in the URDF's "
+                      '<inertial>, joints in the URDF or under loop_closures.<name>')
+    source = read_source(r, base_dir)
+    robot = Robot(source)
+    closures = read_closures(r, robot)
+    base = _choose_base(r, robot)
+    bodies = merge_fixed(robot, base)
+    return _native(r, robot, closures, base, bodies)
+
+
+def _choose_base(r, robot):
+    base = r.string('mechanism.base_link')
+    if base is None:
+        return robot.root
+    if base not in robot.links:
+        raise MechanismConfigError(
+            'mechanism.base_link', f"'{base}' is not a link of the URDF (its root link is "
+                                   f"'{robot.root}', the default base)")
+    return base
+
+
+def _native(r, robot, closures, base, bodies):
+    out = {}
+    for name, value in r.params.items():
+        if name in _CONSUMED or name == 'loop_closures' or name.startswith(
+                ('loop_closures.', 'mechanism.initial_positions.')):
+            continue
+        out[name] = value
+    if 'mechanism.name' not in out and robot.name:
+        out['mechanism.name'] = robot.name
+    out['mechanism.base_link'] = base
+    links = [name for name in robot.links if bodies.body[name] == name and name != base]
+    if not links:
+        raise robot.error(robot.links[base].line,
+                          f"the URDF has no link that moves relative to the base link '{base}'")
+    for name in links:
+        _check_name(robot, robot.links[name], 'link')
+    tree_joints = [joint for joint in robot.joints.values() if joint.kind != 'fixed']
+    for joint in tree_joints:
+        _check_name(robot, joint, 'joint')
+    out['mechanism.links'] = links
+    out['mechanism.joints'] = [j.name for j in tree_joints] + [c.name for c in closures]
+    coordinates = [j.name for j in tree_joints] + [
+        c.name for c in closures if c.kind in ('revolute', 'prismatic')]
+    _check_active(r, robot, closures)
+    out['mechanism.initial_positions'] = _initial_positions(r, robot, closures, coordinates)
+    for name in links:
+        mass, com, inertia = mass_properties(bodies, name)
+        out[f'links.{name}.mass'] = float(mass)
+        out[f'links.{name}.com'] = com
+        out[f'links.{name}.inertia'] = six(inertia)
+    for joint in tree_joints:
+        _native_joint(out, bodies, joint.name,
+                      'revolute' if joint.kind == 'continuous' else joint.kind,
+                      joint.parent, joint.child, (joint.xyz, joint.rpy, ZERO, ZERO),
+                      joint.axis)
+        if joint.limit is not None:
+            lower, upper, effort = joint.limit
+            prefix = f'joints.{joint.name}.'
+            if lower is not None:
+                out[prefix + 'lower'], out[prefix + 'upper'] = lower, upper
+            if effort is not None:
+                out[prefix + 'effort'] = effort
+    for closure in closures:
+        if bodies.body[closure.parent] == bodies.body[closure.child]:
+            raise MechanismConfigError(
+                f'loop_closures.{closure.name}.child',
+                f"links '{closure.parent}' and '{closure.child}' are already rigidly connected "
+                f"(fixed joints weld them into one body, '{bodies.body[closure.child]}'): a "
+                f'loop closure must join two links that can move relative to each other')
+        _native_joint(out, bodies, closure.name, closure.kind, closure.parent, closure.child,
+                      closure.offsets, closure.axis)
+        if closure.axis2 is not None:
+            out[f'joints.{closure.name}.axis2'] = [float(x) for x in closure.axis2]
+    return out
+
+
+def _native_joint(out, bodies, name, kind, parent, child, offsets, axis):
+    prefix = f'joints.{name}.'
+    parent_xyz, parent_rpy, child_xyz, child_rpy = offsets
+    out[prefix + 'type'] = kind
+    out[prefix + 'parent'] = bodies.body[parent]
+    out[prefix + 'child'] = bodies.body[child]
+    out[prefix + 'parent_xyz'], out[prefix + 'parent_rpy'] = bodies.attach(
+        parent, parent_xyz, parent_rpy)
+    out[prefix + 'child_xyz'], out[prefix + 'child_rpy'] = bodies.attach(
+        child, child_xyz, child_rpy)
+    if axis is not None:
+        out[prefix + 'axis'] = [float(x) for x in axis]
+
+
+def _check_name(robot, item, kind):
+    if NAME_PATTERN.match(item.name):
+        return
+    raise robot.error(
+        item.line, f"{kind} name '{item.name}' may hold only letters, digits and '_', not "
+                   f"starting with a digit: names of links and joints become parts of ROS 2 "
+                   f"parameter names ({kind}s.<name>.*); rename it in the URDF (links "
+                   f"welded to another by a fixed joint, fixed joints and the base link are "
+                   f"exempt)")
+
+
+def _check_active(r, robot, closures):
+    active = r.string_list('mechanism.active_joints')
+    kinds = {c.name: c.kind for c in closures}
+    for name in active or ():
+        if name in robot.joints and robot.joints[name].kind == 'fixed':
+            raise MechanismConfigError(
+                'mechanism.active_joints',
+                f"'{name}' is a fixed joint of the URDF (line {robot.joints[name].line}): it "
+                f'welds two links together and cannot be driven')
+        if kinds.get(name) in ('spherical', 'universal', 'fixed'):
+            raise MechanismConfigError(
+                'mechanism.active_joints',
+                f"'{name}' is a {kinds[name]} loop closure: spherical, universal and fixed "
+                f'joints are passive (only revolute and prismatic joints can be driven)')
+        if name not in robot.joints and name not in kinds:
+            raise MechanismConfigError(
+                'mechanism.active_joints',
+                f"'{name}' is neither a joint of the URDF nor in mechanism.loop_closures")
+
+
+def _initial_positions(r, robot, closures, coordinates):
+    prefix = 'mechanism.initial_positions'
+    if r.has(prefix):
+        value = r.params[prefix]
+        if isinstance(value, dict):
+            raise MechanismConfigError(
+                prefix, 'has no entries; give joint: position entries, or delete it for zeros')
+        raise MechanismConfigError(
+            prefix, f'must map joint names to positions with a URDF (e.g. '
+                    f'initial_positions: {{{coordinates[0] if coordinates else "joint"}: 0.5}}), '
+                    f'got {show(value)}')
+    given = {}
+    kinds = {c.name: c.kind for c in closures}
+    for key in r.params:
+        if not key.startswith(prefix + '.'):
+            continue
+        name = key[len(prefix) + 1:]
+        value = as_float(key, r.raw(key, required=True))
+        if name not in coordinates:
+            if name in robot.joints:
+                why = f'a fixed joint of the URDF (line {robot.joints[name].line})'
+            elif name in kinds:
+                why = f'a {kinds[name]} loop closure'
+            else:
+                why = None
+            raise MechanismConfigError(
+                key, f"'{name}' is {why}: it has no position" if why else
+                     f"'{name}' is neither a revolute or prismatic joint of the URDF nor in "
+                     f"mechanism.loop_closures")
+        given[name] = value
+    return [given.get(name, 0.0) for name in coordinates]
