@@ -228,7 +228,7 @@ class CogIdNode(Node):
         self.setpoint_timeout = cfg['setpoint_timeout']
         self.timeout_behavior = cfg['timeout_behavior']
         self.warning_period = cfg['warning_period']
-        self.unwrap = [cfg['unwrap_angles'] and t == 'revolute' for t in self.active_types]
+        self.unwrap = [cfg['unwrap_angles'] and kind.wraps for kind in mech.active_kinds]
         self.max_step = cfg['max_setpoint_step']
         self.max_stamp_lead_ns = cfg['max_stamp_lead'] * NANOSECONDS \
             if math.isfinite(cfg['max_stamp_lead']) else math.inf
