@@ -6,7 +6,9 @@ Where the paper's equations live:
   eq. (1)-(4)  cog_jacobian.py    g_i, G_i = dg_i/dtheta_m, Gdot_i thetadot_m
   eq. (5)      newton_euler.py    F_i = M_i qddot_i + b_i
 and what they stand on: closure.py (loop equations, Newton), joint_motion.py (actuator to
-joint rates), kinematics.py (tree, poses, twists), spatial.py / lane_linalg.py (algebra).
+joint rates), kinematics.py (tree, poses, twists), joints.py (each kind of joint's part in
+them), spatial.py / lane_linalg.py (algebra). mechanism.py reads a mechanism; assembly.py
+and degrees_of_freedom.py analyse it at load.
 Who runs them: sample_solve.py (one sample: continuation, Newton, checks) calling the
 kernels of kernels.py; batch.py (N samples on arrays); inverse_dynamics.py (the solver
 users call, InverseDynamics); inputs.py (what it accepts).

@@ -166,7 +166,7 @@ class Batch:
             s = np.where(span > 0, (index - knots_at[prv]) / span, 0.0)
         s = np.clip(s, 0.0, 1.0)[:, None]
         z = qa[:, m.primary]
-        turns = np.array([m.joint_types[j] == 'revolute' for j in m.primary_joints])
+        turns = np.array([m.active_kinds[a].wraps for a in m.primary])
         setpoints = np.vstack([start[m.primary][None, :], z])      # row 0: the warm start
         lo, hi = np.maximum(knots_at - 1, -1), np.minimum(knots_at + 1, n - 1)
         dz = _wrapped(setpoints[hi + 1] - setpoints[lo + 1], turns) / (hi - lo)[:, None]

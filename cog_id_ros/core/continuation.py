@@ -55,17 +55,17 @@ def length_scale(mechanism):
 
 
 def joint_step_limits(mechanism, step):
-    """Per coordinate, the largest motion of one continuation step (rad or m; a
-    quaternion's components move by half the angle: step / 2)."""
+    """Per coordinate, the largest motion of one continuation step, as its joint's kind
+    shares it out (joints.py: rad, or m for a length; a quaternion's components move by
+    half the angle: step / 2)."""
     scale = length_scale(mechanism)
-    share = {'revolute': step, 'prismatic': step * scale, 'quaternion': step / 2.0}
-    return [share[kind] for kind in mechanism.coordinate_types]
+    return [kind.step_share(step, scale) for kind in mechanism.model.coordinate_kinds]
 
 
-def revolute_active(mechanism):
-    """Indices into active_joints of the revolute actuators (their coordinates wrap)."""
-    return [a for a, j in enumerate(mechanism.active_index)
-            if mechanism.joint_types[j] == 'revolute']
+def wrapping_actuators(mechanism):
+    """Indices into active_joints of the actuators whose coordinates wrap at 2 pi (the
+    revolute ones: ``kind.wraps``)."""
+    return [a for a, kind in enumerate(mechanism.active_kinds) if kind.wraps]
 
 
 def wrapped_state(mechanism, wrapping, state, target):

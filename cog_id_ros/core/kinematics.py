@@ -5,22 +5,15 @@ the order joints are listed); every other joint closes a loop. A tree joint may 
 either direction: the edge remembers a sign so that the joint coordinate keeps its meaning
 (motion of the joint's child attachment frame relative to its parent attachment frame).
 
-Every revolute or prismatic joint, tree or loop-closing, has a coordinate of the model; the
-loop-closing ones are tied to the others by the closure equations (closure.py). Spherical,
-universal and fixed joints have no coordinate of their own: they close loops where they can
-(their closure equations hold the two attachment frames together, closure.py), and enter
-the tree only where a link cannot be reached otherwise (fixed first, then universal, then
-spherical), with *hidden* coordinates that no output shows:
+Every joint with a coordinate of its own (revolute, prismatic), tree or loop-closing, has a
+coordinate of the model; the loop-closing ones are tied to the others by the closure
+equations (closure.py). Joints without one (spherical, universal, fixed) close loops where
+they can, and enter the tree only where a link cannot be reached otherwise (those with the
+fewest hidden coordinates first), with *hidden* coordinates that no output shows. What each
+kind of joint does here (its edges, the child's pose, the twists S of its coordinates, the
+bias) its kind object says (joints.py); the recursions below only ask it.
 
-* fixed: none, a constant transform;
-* universal: two angles, about ``axis`` and then ``axis2``, through a massless virtual link
-  (the cross); the two axes stay perpendicular, so the pair never locks;
-* spherical: a quaternion (w, x, y, z), the rotation of the child attachment frame in the
-  parent attachment frame, R = R_h(q) / |q|^2, whose rates give the angular velocity
-  2 G(q) qdot / |q|^2 (no angle triple, so no gimbal lock anywhere); one extra closure
-  equation, |q|^2 = 1, takes up the fourth coordinate (a ``unit`` constraint).
-
-Model coordinates are the mechanism's revolute and prismatic joints in order, then the hidden
+Model coordinates are the mechanism's joints with a coordinate in order, then the hidden
 ones; a velocity basis, a Newton increment or a step limit has one entry per coordinate.
 """
 from collections import deque
@@ -35,31 +28,19 @@ BASE = -1
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-#: joint types with one coordinate, and those without one of their own (kinematics docstring)
-COORDINATE_TYPES = ('revolute', 'prismatic')
-CLOSURE_TYPES = ('spherical', 'universal', 'fixed')
-#: which of them enters the tree first where a link is out of reach otherwise (fewest
-#: hidden coordinates first)
-TREE_PREFERENCE = ('fixed', 'universal', 'spherical')
-
-
 @dataclass
 class JointSpec:
+    """A declared joint: its kind object (joints.py, holding the kind's parameters such as
+    the axis) between links ``parent`` and ``child`` (BASE: the base link), and its
+    attachment frames on them (xyz, roll-pitch-yaw)."""
     name: str
-    revolute: bool
-    parent: int          # link index, BASE for the base link
+    kind: object
+    parent: int
     child: int
     parent_xyz: tuple
     parent_rpy: tuple
     child_xyz: tuple
     child_rpy: tuple
-    axis: tuple          # unit vector in the joint frame (universal: parent attachment frame)
-    kind: str = ''       # one of COORDINATE_TYPES or CLOSURE_TYPES ('' : from ``revolute``)
-    axis2: tuple = ()    # universal: unit second axis in the child attachment frame
-
-    def __post_init__(self):
-        if not self.kind:
-            self.kind = 'revolute' if self.revolute else 'prismatic'
 
 
 @dataclass
@@ -68,56 +49,53 @@ class TreeEdge:
 
     The child link's pose in the parent link frame is L(q) = A M(sign q) B, where A and B
     are the attachment frames (A = parent side of the tree edge, B the inverse of the child
-    side) and M the joint motion. For a revolute joint with K = skew(axis):
-      R_L = r0 + sin(q) r1 + (1 - cos q) r2,  t_L = t0 + sin(q) t1 + (1 - cos q) t2
-    and for a prismatic one R_L = r0, t_L = t0 + q t1. The sign is folded into r1, t1.
-    A fixed edge (``kind`` 'fixed') is r0, t0 alone; a spherical one ('ball') is
-    A R(q) B with the quaternion coordinates ``coords`` (r1 = B's rotation, t1 = B's
-    translation). ``joint`` is the coordinate of a revolute or prismatic edge (None else).
+    side) and M the joint motion; ``kind`` (joints.py) folds A, B and the sign into r0 ...
+    t2 and evaluates them (``kind.place``). ``joint`` is the edge's coordinate for a joint
+    with one of its own (None else); ``coords`` every coordinate of the edge (one, none, or
+    its kind's hidden ones); ``axis_p`` and ``origin_p`` its axis and a point of it in the
+    tree-parent link frame.
     """
     joint: 'int | None'
     parent: int
     child: int
-    sign: float
-    revolute: bool
-    r0: tuple
-    r1: tuple
-    r2: tuple
-    t0: tuple
-    t1: tuple
-    t2: tuple
-    axis_p: tuple        # joint axis in the tree-parent link frame
-    origin_p: tuple      # a point of the joint axis in the tree-parent link frame
-    kind: str = ''       # 'revolute', 'prismatic', 'fixed' or 'ball'
-    coords: tuple = ()   # the coordinates of the edge (one, none, or a quaternion's four)
-    name: str = ''       # the declared joint it comes from
+    kind: object
+    name: str            # the declared joint it comes from
+    sign: float = 1.0
+    r0: tuple = sp.IDENTITY
+    r1: tuple = sp.IDENTITY
+    r2: tuple = sp.IDENTITY
+    t0: tuple = ZERO3
+    t1: tuple = ZERO3
+    t2: tuple = ZERO3
+    axis_p: tuple = ZERO3
+    origin_p: tuple = ZERO3
+    coords: tuple = ()
 
     def __post_init__(self):
-        if not self.kind:
-            self.kind = 'revolute' if self.revolute else 'prismatic'
         if not self.coords and self.joint is not None:
             self.coords = (self.joint,)
 
 
 @dataclass
 class LoopJoint:
-    """A loop-closing joint between its declared parent and child links. ``joint`` is its
-    coordinate, None for a spherical, universal or fixed joint (``kind``)."""
+    """A constraint of the closure equations: a loop-closing joint between its declared
+    parent and child links (``joint`` its coordinate, None for a joint without one), or a
+    constraint a joint in the tree adds (a spherical joint's unit quaternion). ``kind``
+    (joints.py) writes its rows."""
     joint: 'int | None'
     parent: int
     child: int
-    revolute: bool
-    d0: tuple            # R_pj, R_pj K, R_pj K^2: parent attachment rotation after motion q is
-    d1: tuple            # d0 + sin(q) d1 + (1 - cos q) d2 (revolute) or d0 (prismatic)
-    d2: tuple
-    t_pj: tuple
-    axis_p: tuple        # joint axis in the parent link frame
-    r_cj: tuple
-    t_cj: tuple
+    kind: object
+    name: str
+    d0: tuple = sp.IDENTITY  # R_pj, R_pj K, R_pj K^2: the parent attachment rotation after
+    d1: tuple = sp.IDENTITY  # a rotation q about the axis is d0 + sin(q) d1 + (1 - cos q) d2
+    d2: tuple = sp.IDENTITY
+    t_pj: tuple = ZERO3
+    axis_p: tuple = ZERO3    # joint axis in the parent link frame
+    r_cj: tuple = sp.IDENTITY
+    t_cj: tuple = ZERO3
+    axis_c: tuple = ()       # a second axis (universal) in the child link frame
     cycle: list = field(default_factory=list)   # (tree joint, +1/-1): twist_child - twist_parent
-    kind: str = 'revolute'
-    name: str = ''
-    axis_c: tuple = ()   # universal: the second axis in the child link frame
 
 
 class KinematicModel:
@@ -129,13 +107,14 @@ class KinematicModel:
         self.closures = list(closures)        # spherical, universal, fixed
         self.n_links = len(self.link_names)   # grows by a virtual link per tree universal joint
         self.n_joints = len(self.joints)      # the declared joints with a coordinate
-        #: per model coordinate: 'revolute', 'prismatic' or 'quaternion', its name (a hidden
-        #: one: '<joint>.<part>') and the declared joint it belongs to
+        #: per model coordinate: the kind object it belongs to (its ``coordinate_type``
+        #: and ``step_share``), its name (a hidden one: '<joint>.<part>') and its joint
         self.coordinate_kinds = [spec.kind for spec in self.joints]
         self.coordinate_names = [spec.name for spec in self.joints]
         self.coordinate_joints = [spec.name for spec in self.joints]
         #: the hidden coordinates' values where their attachment frames coincide
         self.hidden_start = []
+        #: tree edges, loop-closing joints, and the constraints joints in the tree add
         self.edges, self.loops, self.units = [], [], []
         self.edge_of_link = [None] * self.n_links
         self._build_tree()
@@ -149,17 +128,24 @@ class KinematicModel:
                 self.loops_of_joint[j].append(li)
         self._orders = {}
 
-    def _hidden(self, spec, parts, kind, start):
-        """New hidden coordinates of ``spec`` (one per part); their indices."""
+    @property
+    def coordinate_types(self):
+        """Per coordinate: 'revolute', 'prismatic', 'quaternion' (its kind's word)."""
+        return [kind.coordinate_type for kind in self.coordinate_kinds]
+
+    def hidden(self, spec):
+        """New hidden coordinates of ``spec``, one per part its kind names; their indices."""
+        kind = spec.kind
         first = len(self.coordinate_kinds)
-        for part, value in zip(parts, start):
+        for part, value in zip(kind.hidden, kind.hidden_start):
             self.coordinate_kinds.append(kind)
             self.coordinate_names.append(f'{spec.name}.{part}')
             self.coordinate_joints.append(spec.name)
             self.hidden_start.append(value)
-        return tuple(range(first, first + len(parts)))
+        return tuple(range(first, first + len(kind.hidden)))
 
-    def _virtual_link(self, name):
+    def virtual_link(self, name):
+        """A new massless link of the tree (not a link of the mechanism); its index."""
         self.link_names.append(name)
         self.edge_of_link.append(None)
         self.n_links += 1
@@ -199,12 +185,12 @@ class KinematicModel:
                     other = spec.child if spec.parent == link else spec.parent
                     if other in up:
                         continue
-                    grow(_tree_edge(j, spec, link, other), link, other)
+                    grow(spec.kind.tree_edge(j, spec, link, other), link, other)
                     in_tree[j] = True
                     queue.append(other)
-            # links out of reach of revolute and prismatic joints: through a joint without a
+            # links out of reach of the joints with a coordinate: through a joint without a
             # coordinate of its own (the one with fewest hidden coordinates, first listed)
-            reaching = [(TREE_PREFERENCE.index(spec.kind), k) for k, spec in
+            reaching = [(len(spec.kind.hidden), k) for k, spec in
                         enumerate(self.closures) if not closure_in_tree[k] and
                         (spec.parent in up) != (spec.child in up)]
             if not reaching:
@@ -231,40 +217,30 @@ class KinematicModel:
 
     def start(self, positions):
         """Every coordinate at the start of assembly: ``positions`` (one per joint), the
-        universal joints' angles at 0 (their attachment frames coincide), and each spherical
-        tree joint turned so that the link it reaches puts its other joint centres where
-        their partners are (a least-squares fit of the rotation, :func:`_fitted_rotation`);
-        with fewer than two such centres, its frame parallel to the base frame."""
+        hidden ones at their kinds' ``hidden_start`` (their attachment frames coincide),
+        then as each tree edge's kind sets them (``kind.start``: a spherical joint turned
+        to fit its link's other joints)."""
         q = list(positions) + list(self.hidden_start)
         for e in self.edges:
-            if e.kind != 'ball':
-                continue
-            frames = forward_kinematics(self, q, sp.ScalarOps)
-            parent = frames.rot[e.parent] if e.parent != BASE else sp.IDENTITY
-            child = self._fitted_rotation(e, frames) or sp.IDENTITY
-            turn = sp.mat_mat(sp.mat_mat(sp.transpose(e.r0), sp.transpose(parent)),
-                              sp.mat_mat(child, sp.transpose(e.r1)))
-            for c, value in zip(e.coords, sp.rotation_quaternion(turn)):
-                q[c] = value
+            e.kind.start(self, e, q)
         return q
 
-    def _fitted_rotation(self, e, frames):
-        """The rotation of ``e``'s child link that best carries the centres of its other
-        joints (revolute, spherical, universal, fixed: their two attachment origins
-        coincide) to their partners' centres on links outside its subtree, about the ball's
-        centre (Kabsch); None with fewer than two independent directions."""
-        outside = self._outside(e.child)
-        centre = point_to_base(frames, e.parent, e.origin_p)
-        own = sp.mat_t_vec(e.r1, sp.scale(e.t1, -1.0))      # the ball's centre on the child
+    def fitted_rotation(self, link, own, centre, frames, skip):
+        """The rotation of tree link ``link`` about its point ``own`` (at ``centre`` in the
+        base frame) that best carries the centres of its joints but ``skip`` (those whose
+        two attachment origins coincide: ``kind.origins_coincide``) to their partners'
+        centres on links outside its subtree (Kabsch); None with fewer than two
+        independent directions."""
+        outside = self._outside(link)
         pairs = []
         for spec in self.joints + self.closures:
-            if spec.kind == 'prismatic' or spec.name == e.name:
+            if not spec.kind.origins_coincide or spec.name == skip:
                 continue
             for near, far, near_xyz, far_xyz in ((spec.child, spec.parent, spec.child_xyz,
                                                   spec.parent_xyz),
                                                  (spec.parent, spec.child, spec.parent_xyz,
                                                   spec.child_xyz)):
-                if near == e.child and far in outside:
+                if near == link and far in outside:
                     pairs.append((sp.sub(near_xyz, own),
                                   sp.sub(point_to_base(frames, far, far_xyz), centre)))
         if len(pairs) < 2:
@@ -295,42 +271,14 @@ class KinematicModel:
         return [(c, sign) for e in path for c in self.edges[e].coords]
 
     def _tree_closure(self, spec, up, grow):
-        """Put a spherical, universal or fixed joint into the tree (from its end that is
-        already reached to the other); returns the link it reaches."""
-        if spec.parent in up:
-            link, other, near, far = spec.parent, spec.child, 'parent', 'child'
-        else:
-            link, other, near, far = spec.child, spec.parent, 'child', 'parent'
-        if spec.kind == 'universal':         # two revolutes through a massless cross
-            cross = self._virtual_link(f'{spec.name}.cross')
-            first, second = self._hidden(spec, ('axis', 'axis2'), 'revolute', (0.0, 0.0))
-            outer = JointSpec(spec.name, True, spec.parent, cross, spec.parent_xyz,
-                              spec.parent_rpy, ZERO3, ZERO3, spec.axis)
-            inner = JointSpec(spec.name, True, cross, spec.child, ZERO3, ZERO3,
-                              spec.child_xyz, spec.child_rpy, spec.axis2)
-            hops = ((first, outer, cross), (second, inner, other)) if near == 'parent' else \
-                ((second, inner, cross), (first, outer, other))
-            for coordinate, half, ahead in hops:
-                grow(_tree_edge(coordinate, half, link, ahead), link, ahead)
-                link = ahead
-            return other
-        a = _attachment(spec, near)
-        b = sp.inverse_transform(*_attachment(spec, far))
-        if spec.kind == 'fixed':
-            r0, t0 = sp.compose(a, b)
-            edge = TreeEdge(None, link, other, 1.0, False, r0, sp.IDENTITY, sp.IDENTITY, t0,
-                            ZERO3, ZERO3, ZERO3, a[1], kind='fixed', name=spec.name)
-        else:                                # spherical: a quaternion
-            coords = self._hidden(spec, ('w', 'x', 'y', 'z'), 'quaternion',
-                                  (1.0, 0.0, 0.0, 0.0))
-            edge = TreeEdge(None, link, other, 1.0, False, a[0], b[0], sp.IDENTITY, a[1],
-                            b[1], ZERO3, ZERO3, a[1], kind='ball', coords=coords,
-                            name=spec.name)
-            unit = LoopJoint(None, link, other, False, sp.IDENTITY, sp.IDENTITY, sp.IDENTITY,
-                             ZERO3, ZERO3, sp.IDENTITY, ZERO3, kind='unit', name=spec.name)
-            unit.cycle = [(c, 1.0) for c in coords]
-            self.units.append(unit)
-        grow(edge, link, other)
+        """Put a joint without a coordinate of its own into the tree (from its end that is
+        already reached to the other), as its kind says; returns the link it reaches."""
+        link, other = (spec.parent, spec.child) if spec.parent in up else \
+            (spec.child, spec.parent)
+        edges, constraints = spec.kind.enter_tree(self, spec, link, other)
+        for edge in edges:
+            grow(edge, edge.parent, edge.child)
+        self.units.extend(constraints)
         return other
 
     def elimination_order(self, columns):
@@ -368,7 +316,7 @@ def _paths_below_common_ancestor(up, depth, a, b):
     return path_a, path_b
 
 
-def _attachment(spec, side):
+def attachment(spec, side):
     """(rotation, translation) of a joint's attachment frame on ``side`` ('parent' or
     'child') in that link's frame."""
     if side == 'parent':
@@ -376,40 +324,15 @@ def _attachment(spec, side):
     return sp.rpy_matrix(spec.child_rpy), tuple(spec.child_xyz)
 
 
-def _tree_edge(j, spec, tree_parent, tree_child, name=''):
-    r_pj, r_cj = sp.rpy_matrix(spec.parent_rpy), sp.rpy_matrix(spec.child_rpy)
-    if spec.parent == tree_parent:   # written from the tree parent outwards
-        sign, r_a, t_a, r_c, t_c = 1.0, r_pj, spec.parent_xyz, r_cj, spec.child_xyz
-    else:                            # written towards the base: the tree sees -q
-        sign, r_a, t_a, r_c, t_c = -1.0, r_cj, spec.child_xyz, r_pj, spec.parent_xyz
-    r_b = sp.transpose(r_c)
-    t_b = sp.scale(sp.mat_vec(r_b, t_c), -1.0)
-    k = sp.skew(spec.axis)
-    k2 = sp.mat_mat(k, k)
-    r_ak = sp.mat_mat(r_a, k)
-    r_ak2 = sp.mat_mat(r_a, k2)
-    axis_p = sp.mat_vec(r_a, spec.axis)
-    t0 = sp.add(t_a, sp.mat_vec(r_a, t_b))
-    if spec.revolute:
-        r1 = sp.mat_mat(r_ak, r_b)
-        return TreeEdge(j, tree_parent, tree_child, sign, True,
-                        sp.mat_mat(r_a, r_b), tuple(sign * x for x in r1), sp.mat_mat(r_ak2, r_b),
-                        t0, sp.scale(sp.mat_vec(r_ak, t_b), sign), sp.mat_vec(r_ak2, t_b),
-                        axis_p, tuple(t_a), name=name or spec.name)
-    return TreeEdge(j, tree_parent, tree_child, sign, False,
-                    sp.mat_mat(r_a, r_b), sp.IDENTITY, sp.IDENTITY,
-                    t0, sp.scale(axis_p, sign), sp.ZERO3, axis_p, tuple(t_a),
-                    name=name or spec.name)
-
-
 def _loop_joint(j, spec):
     r_pj, r_cj = sp.rpy_matrix(spec.parent_rpy), sp.rpy_matrix(spec.child_rpy)
-    k = sp.skew(spec.axis)
-    return LoopJoint(j, spec.parent, spec.child, spec.revolute,
+    axis, axis2 = spec.kind.axis, spec.kind.axis2
+    k = sp.skew(axis)
+    return LoopJoint(j, spec.parent, spec.child, spec.kind, spec.name,
                      r_pj, sp.mat_mat(r_pj, k), sp.mat_mat(r_pj, sp.mat_mat(k, k)),
-                     tuple(spec.parent_xyz), sp.mat_vec(r_pj, spec.axis),
-                     r_cj, tuple(spec.child_xyz), kind=spec.kind, name=spec.name,
-                     axis_c=sp.mat_vec(r_cj, spec.axis2) if spec.axis2 else ())
+                     tuple(spec.parent_xyz), sp.mat_vec(r_pj, axis),
+                     r_cj, tuple(spec.child_xyz),
+                     axis_c=sp.mat_vec(r_cj, axis2) if axis2 else ())
 
 
 def loop_columns(loop):
@@ -456,72 +379,27 @@ def vector_to_base(frames, link, vector):
     return vector if rot is None else sp.mat_vec(rot, vector)
 
 
-def joint_twist(revolute, axis, origin):
-    """Unit twist of a joint: rotation about the line (origin, axis) or translation along axis."""
-    if revolute:
-        return (axis, sp.cross(origin, axis))
-    return (sp.ZERO3, axis)
-
-
 def forward_kinematics(model, q, ops):
-    """Link poses and joint twists for joint coordinates q (list of lanes, joints order)."""
+    """Link poses and joint twists for joint coordinates q (list of lanes, joints order):
+    each tree edge's kind places its child and gives its coordinates' twists, then each
+    loop-closing joint's kind the twist of its own coordinate."""
     frames = Frames()
-    rot = [None] * model.n_links
-    pos = [None] * model.n_links
-    xi = [None] * model.n_coordinates
-    frames.rot, frames.pos, frames.xi = rot, pos, xi
+    frames.rot = [None] * model.n_links
+    frames.pos = [None] * model.n_links
+    frames.xi = [None] * model.n_coordinates
     for e in model.edges:
-        if e.kind == 'fixed':
-            rot[e.child], pos[e.child] = to_base(frames, e.parent, e.r0, e.t0)
-            continue
-        if e.kind == 'ball':
-            _ball(frames, e, [q[c] for c in e.coords], ops)
-            continue
-        qj = q[e.joint]
-        if e.revolute:
-            s, c1 = ops.sin(qj), 1.0 - ops.cos(qj)
-            r_local = sp.mat_combination(e.r0, e.r1, s, e.r2, c1)
-            t_local = sp.vec_combination(e.t0, e.t1, s, e.t2, c1)
-        else:
-            r_local = e.r0
-            t_local = sp.add_scaled(e.t0, e.t1, qj)
-        rot[e.child], pos[e.child] = to_base(frames, e.parent, r_local, t_local)
-        axis = sp.scale(vector_to_base(frames, e.parent, e.axis_p), e.sign)
-        xi[e.joint] = joint_twist(e.revolute, axis, point_to_base(frames, e.parent, e.origin_p))
+        e.kind.place(frames, e, q, ops)
     for lp in model.loops:
-        if lp.joint is not None:
-            axis = vector_to_base(frames, lp.parent, lp.axis_p)
-            xi[lp.joint] = joint_twist(lp.revolute, axis,
-                                       point_to_base(frames, lp.parent, lp.t_pj))
+        lp.kind.loop_twist(frames, lp)
     return frames
-
-
-def _ball(frames, e, quaternion, ops):
-    """Pose of a spherical tree edge's child, A R(q) B, and the twists of its quaternion
-    coordinates: rotations about 2 G(q)[:, k] / |q|^2 (parent attachment frame) through
-    the joint centre, where the angular velocity is 2 G(q) qdot / |q|^2."""
-    rotation, rates = sp.quaternion_rotation(quaternion, ops)
-    r_local = sp.mat_mat(sp.mat_mat(e.r0, rotation), e.r1)
-    t_local = sp.add(e.t0, sp.mat_vec(e.r0, sp.mat_vec(rotation, e.t1)))
-    frames.rot[e.child], frames.pos[e.child] = to_base(frames, e.parent, r_local, t_local)
-    centre = point_to_base(frames, e.parent, e.origin_p)
-    for c, rate in zip(e.coords, rates):
-        axis = vector_to_base(frames, e.parent, sp.mat_vec(e.r0, rate))
-        frames.xi[c] = joint_twist(True, axis, centre)
 
 
 def link_twists(model, frames, qdot):
     """Twist of every link for joint rates qdot (eq. 2 before projection onto the links' COGs)."""
     twists = [None] * model.n_links
     for e in model.edges:
-        twist = None if e.parent == BASE else twists[e.parent]
-        for c in e.coords:
-            xi, rate = frames.xi[c], qdot[c]
-            if twist is None:
-                twist = (sp.scale(xi[0], rate), sp.scale(xi[1], rate))
-            else:
-                twist = sp.twist_add_scaled(twist, xi, rate)
-        twists[e.child] = sp.ZERO_TWIST if twist is None else twist
+        twists[e.child] = e.kind.child_twist(
+            e, frames, None if e.parent == BASE else twists[e.parent], qdot)
     return twists
 
 
@@ -530,21 +408,10 @@ def twist_of(twists, link):
 
 
 def link_bias_accelerations(model, frames, twists, qdot):
-    """Spatial acceleration of every link when all joint accelerations are zero.
-
-    A joint twist is fixed in the inner body, so it changes at the rate twist_parent x xi:
-    a_child = a_parent + (v_parent x xi) qdot  (+ xi qddot, added separately).
-    A spherical edge's quaternion twists also change with q, but their rates add up to
-    2 G(qdot) qdot / |q|^2 = 0 (and a term in q . qdot, zero on the unit sphere).
-    """
+    """Spatial acceleration of every link when all joint accelerations are zero (each
+    edge's kind adds its joint's bias to its parent's; ``xi qddot`` is added separately)."""
     acc = [None] * model.n_links
     for e in model.edges:
-        if e.parent == BASE:
-            acc[e.child] = sp.ZERO_TWIST     # the joint twist of a grounded joint is constant
-            continue
-        a = acc[e.parent]
-        for c in e.coords:
-            rate_of_xi = sp.motion_cross(twists[e.parent], frames.xi[c])
-            a = sp.twist_add_scaled(a, rate_of_xi, qdot[c])
-        acc[e.child] = a
+        acc[e.child] = e.kind.child_bias(e, frames, twist_of(twists, e.parent),
+                                         twist_of(acc, e.parent), qdot)
     return acc

@@ -26,9 +26,9 @@ from .continuation import (
     fits_one_step,
     intermediate_goal,
     joint_step_limits,
-    revolute_active,
     step_ratio,
     wrapped_state,
+    wrapping_actuators,
 )
 from .errors import ClosureError, SingularConfigurationError
 from .joint_motion import projected_pose
@@ -69,7 +69,7 @@ class SampleSolver:
         self.kernels = kernels
         self.limits = joint_step_limits(m, continuation_step)
         self.bounds = correction_bounds(self.limits)
-        self.wrapping = revolute_active(m)
+        self.wrapping = wrapping_actuators(m)
         self.free = m.free_joints
         self.tolerance = m.closure_tolerance
         self.redundant = m.is_redundant

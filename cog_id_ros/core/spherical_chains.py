@@ -44,6 +44,8 @@ import numpy as np
 
 from . import kinematics as kin
 from . import spatial as sp
+from .joints import Revolute, Spherical
+from .pipeline import massless
 
 #: cosine below which two axes count as perpendicular, and the distance (times the
 #: mechanism's largest joint offset, at least 1 m) within which axes count as meeting
@@ -75,6 +77,16 @@ class SphericalChain:
     lock_distance: float = 1.0   # |e1 x T e3| there: 0 at the gimbal lock
 
 
+def chains_of(mechanism, near_lock=False):
+    """:func:`find_chains` of a Mechanism at its assembled pose."""
+    m = mechanism
+    return find_chains(
+        m.links, m.base_link,
+        [massless(mass, inertia) for mass, inertia in zip(m.link_mass, m.link_inertia)],
+        m.joint_specs, m.closure_specs, set(m.active_joints), m.assembled_positions,
+        max(1.0, m.attachment_scale), near_lock)
+
+
 def find_chains(links, base_link, massless, specs, closure_specs, active, positions, scale,
                 near_lock=False):
     """The qualifying chains (module docstring) among revolute and prismatic ``specs``
@@ -93,7 +105,7 @@ def find_chains(links, base_link, massless, specs, closure_specs, active, positi
         for link in (spec.parent, spec.child):
             by_link.setdefault(link, []).append(j)
     helper = [massless[k] and degree[k] == 2 and len(by_link.get(k, ())) == 2 and
-              all(specs[j].kind == 'revolute' and specs[j].name not in active
+              all(specs[j].kind.name == Revolute.name and specs[j].name not in active
                   for j in by_link[k]) for k in range(len(links))]
     used, chains, taken = set(), [], set()
     names = {spec.name for spec in list(specs) + list(closure_specs)}
@@ -152,7 +164,7 @@ def _chain(links, base_link, specs, joints, chain_links, positions, scale, names
     r2b, o2b, _ = _side(specs[j2], b)
     r3b, o3b, s3 = _side(specs[j3], b)
     r3c, o3c, _ = _side(specs[j3], c)
-    axis1, axis2, axis3 = (specs[j].axis for j in joints)
+    axis1, axis2, axis3 = (specs[j].kind.axis for j in joints)
     in_a = _meeting(r1a, o1a, axis1, r2a, o2a, axis2, scale)
     in_b = _meeting(r2b, o2b, axis2, r3b, o3b, axis3, scale)
     if in_a is None or in_b is None or abs(in_a[1] - in_b[0]) > MEETING * scale:
@@ -198,7 +210,7 @@ def solver_parameters(params, chains, joints, positions):
                                           if name not in chain_of]
     for chain in chains:
         prefix = f'joints.{chain.name}.'
-        out.update({prefix + 'type': 'spherical', prefix + 'parent': chain.parent,
+        out.update({prefix + 'type': Spherical.name, prefix + 'parent': chain.parent,
                     prefix + 'child': chain.child,
                     prefix + 'parent_xyz': list(chain.centre_p),
                     prefix + 'parent_rpy': list(sp.matrix_rpy(chain.frame_p)),
@@ -207,9 +219,21 @@ def solver_parameters(params, chains, joints, positions):
     return out
 
 
-def initial_turn(chain):
-    """T at the chain's initial angles."""
-    return _rotation(*chain.axes, chain.reference)
+def with_chain_starts(mechanism, start):
+    """The start of assembly ``start`` of a mechanism that is another's solver form, with
+    the quaternion of every spherical tree joint that stands for a chain of three
+    revolutes (``mechanism.stands_for``) at the chain's initial angles T."""
+    chains = {chain.name: chain for chain in mechanism.stands_for}
+    for e in mechanism.model.edges:
+        chain = chains.get(e.name)     # the spherical joint's edge: it has the chain's name
+        if chain is None:
+            continue
+        turn = _rotation(*chain.axes, chain.reference)
+        if e.child != mechanism.link_index.get(chain.child, kin.BASE):   # reached from C
+            turn = sp.transpose(turn)
+        for c, value in zip(e.coords, sp.rotation_quaternion(turn)):
+            start[c] = value
+    return start
 
 
 def _rotation(e1, e2, e3, angles):

@@ -3,13 +3,13 @@
 type, the links it joins, where it sits on each and its axes."""
 import math
 
+from ..core import joints
 from ..core.errors import MechanismConfigError
-from ..core.mechanism import AXES_PERPENDICULAR, MAX_COORDINATE, MAX_LENGTH, NAME_PATTERN, bounded
+from ..core.joints import AXES_PERPENDICULAR
+from ..core.mechanism import MAX_COORDINATE, MAX_LENGTH, NAME_PATTERN, bounded
 from ..core.parameters import show
 from .frames import ZERO
 
-#: the joint types of ``loop_closures.<name>.type`` (those of the native schema)
-CLOSURE_TYPES = ('revolute', 'prismatic', 'spherical', 'universal', 'fixed')
 #: the keys of ``loop_closures.<name>.*``
 CLOSURE_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz',
                 'child_rpy', 'axis', 'axis2')
@@ -64,10 +64,11 @@ def read_closures(r, robot):
 
 def _read_closure(r, robot, name):
     prefix = f'loop_closures.{name}.'
-    kind = r.string(prefix + 'type', required=True)
-    if kind not in CLOSURE_TYPES:
+    kind = r.string(prefix + 'type', required=True)     # the native schema's types
+    kind_class = joints.kind(kind)
+    if kind_class is None:
         raise MechanismConfigError(
-            prefix + 'type', f"must be one of {', '.join(CLOSURE_TYPES)}, got {show(kind)}")
+            prefix + 'type', f"must be one of {', '.join(joints.names())}, got {show(kind)}")
     ends = []
     for side in ('parent', 'child'):
         link = r.string(prefix + side, required=True)
@@ -85,11 +86,11 @@ def _read_closure(r, robot, name):
                                              ('child_xyz', MAX_LENGTH, 'm'),
                                              ('child_rpy', MAX_COORDINATE, 'rad')))
     axis = axis2 = None
-    if kind in ('revolute', 'prismatic', 'universal'):
+    if 'axis' in kind_class.parameters:
         axis = _axis(r, prefix + 'axis', (0.0, 0.0, 1.0))
     elif r.has(prefix + 'axis'):
         raise MechanismConfigError(prefix + 'axis', f'a {kind} closure has no axis; delete it')
-    if kind == 'universal':
+    if 'axis2' in kind_class.parameters:
         if not r.has(prefix + 'axis2'):
             raise MechanismConfigError(
                 prefix + 'axis2', 'missing: a universal closure needs axis2, its second axis '

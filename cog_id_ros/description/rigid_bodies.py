@@ -33,7 +33,7 @@ def merge_fixed(robot, base):
     body, frame = {}, {}
     for link in robot.walk():
         joint = robot.parent_joint.get(link)
-        if joint is None or joint.kind != 'fixed':
+        if joint is None or not joint.welds:
             body[link], frame[link] = link, Frame()
         else:
             body[link] = body[joint.parent]

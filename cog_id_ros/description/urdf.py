@@ -26,6 +26,7 @@ Every error is a MechanismConfigError naming the parameter (``robot_description`
 ``mechanism.urdf_file``, ``loop_closures.<name>.<key>``, ``mechanism.active_joints``, ...);
 errors inside the URDF give its line and name the link or joint.
 """
+from ..core import joints
 from ..core.errors import MechanismConfigError
 from ..core.mechanism import NAME_PATTERN
 from ..core.parameters import ParameterReader, as_float, show
@@ -112,13 +113,13 @@ def _native(r, robot, closures, base, bodies):
                           f"the URDF has no link that moves relative to the base link '{base}'")
     for name in links:
         _check_name(robot, robot.links[name], 'link')
-    tree_joints = [joint for joint in robot.joints.values() if joint.kind != 'fixed']
+    tree_joints = [joint for joint in robot.joints.values() if not joint.welds]
     for joint in tree_joints:
         _check_name(robot, joint, 'joint')
     out['mechanism.links'] = links
     out['mechanism.joints'] = [j.name for j in tree_joints] + [c.name for c in closures]
     coordinates = [j.name for j in tree_joints] + [
-        c.name for c in closures if c.kind in ('revolute', 'prismatic')]
+        c.name for c in closures if joints.kind(c.kind).has_coordinate]
     _check_active(r, robot, closures)
     out['mechanism.initial_positions'] = _initial_positions(r, robot, closures, coordinates)
     for name in links:
@@ -127,8 +128,7 @@ def _native(r, robot, closures, base, bodies):
         out[f'links.{name}.com'] = com
         out[f'links.{name}.inertia'] = six(inertia)
     for joint in tree_joints:
-        _native_joint(out, bodies, joint.name,
-                      'revolute' if joint.kind == 'continuous' else joint.kind,
+        _native_joint(out, bodies, joint.name, joint.joint_kind.name,
                       joint.parent, joint.child, (joint.xyz, joint.rpy, ZERO, ZERO),
                       joint.axis)
         if joint.limit is not None:
@@ -181,12 +181,12 @@ def _check_active(r, robot, closures):
     active = r.string_list('mechanism.active_joints')
     kinds = {c.name: c.kind for c in closures}
     for name in active or ():
-        if name in robot.joints and robot.joints[name].kind == 'fixed':
+        if name in robot.joints and robot.joints[name].welds:
             raise MechanismConfigError(
                 'mechanism.active_joints',
                 f"'{name}' is a fixed joint of the URDF (line {robot.joints[name].line}): it "
                 f'welds two links together and cannot be driven')
-        if kinds.get(name) in ('spherical', 'universal', 'fixed'):
+        if name in kinds and not joints.kind(kinds[name]).has_coordinate:
             raise MechanismConfigError(
                 'mechanism.active_joints',
                 f"'{name}' is a {kinds[name]} loop closure: spherical, universal and fixed "

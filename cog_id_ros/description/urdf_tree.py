@@ -8,6 +8,7 @@ import re
 
 import numpy as np
 
+from ..core import joints
 from ..core.mechanism import MAX_COORDINATE, MAX_INERTIA, MAX_LENGTH, MAX_MASS, inertia_problem
 from ..core.parameters import show
 from .frames import ZERO, rpy_matrix
@@ -36,10 +37,20 @@ class _Link:
 
 class _Joint:
     def __init__(self, name, line, kind, parent, child, xyz, rpy, axis, limit):
-        self.name, self.line, self.kind = name, line, kind
+        self.name, self.line, self.kind = name, line, kind     # kind: the URDF's type
         self.parent, self.child = parent, child
         self.xyz, self.rpy, self.axis = xyz, rpy, axis
         self.limit = limit       # (lower or None, upper or None, effort or None) or None
+
+    @property
+    def welds(self):
+        """A fixed joint: its two links are one rigid body (never a joint of the model)."""
+        return self.kind == 'fixed'
+
+    @property
+    def joint_kind(self):
+        """The core's joint kind of a joint that moves (URDF 'continuous': a revolute)."""
+        return joints.kind(self.kind, aliases=True)
 
 
 class Robot:

@@ -559,15 +559,15 @@ def solve(solver, q, qd, qdd, chunk, skip_invalid, progress, path, rows=None):
 
 
 def _units(mech):
-    return ['N' if kind == 'prismatic' else 'N m' for kind in _kinds(mech)]
+    return [kind.effort_unit for kind in mech.active_kinds]
 
 
-def _kinds(mech):
-    """'revolute' or 'prismatic' for each active joint."""
-    types = getattr(mech, 'joint_types', None)
-    joints = list(mech.joints)
-    return [types[joints.index(j)] if types is not None else 'revolute'
-            for j in mech.active_joints]
+def _step_limit(args, kind):
+    """(--max-step or --max-step-linear, its name, unit) for a joint of ``kind``: by the unit
+    of its coordinate, an angle or a length."""
+    if kind.unit == 'rad':
+        return args.max_step, '--max-step', kind.unit
+    return args.max_step_linear, '--max-step-linear', kind.unit
 
 
 def _rms(values):
@@ -736,11 +736,9 @@ def _report_skipped(skipped, path, stderr):
 
 
 def _jump_message(args, kinds, active, row, k, step, ref):
-    revolute = kinds[k] == 'revolute'
-    unit, option = ('rad', '--max-step') if revolute else ('m', '--max-step-linear')
-    limit = args.max_step if revolute else args.max_step_linear
+    limit, option, unit = _step_limit(args, kinds[k])
     hint = ''
-    if revolute and not args.unwrap:
+    if kinds[k].wraps and not args.unwrap:
         hint = '; if the angle wraps at +-pi (a continuous joint), use --unwrap'
     return (f'jumps by {step:.6g} {unit} from row {ref} (limit {limit:g} {unit} per row, '
             f'{option}){hint}')
@@ -748,8 +746,8 @@ def _jump_message(args, kinds, active, row, k, step, ref):
 
 def _check_jumps(args, mech, traj, active):
     """Rows to solve (bool mask) and the [Skip] of the jumps; raises without --skip-invalid."""
-    kinds = _kinds(mech)
-    limits = [args.max_step if kind == 'revolute' else args.max_step_linear for kind in kinds]
+    kinds = mech.active_kinds
+    limits = [_step_limit(args, kind)[0] for kind in kinds]
     n = len(traj)
     keep = np.ones(n, bool)
     if all(math.isinf(x) for x in limits):
@@ -865,7 +863,7 @@ def run(args, stdout, stderr, signals=None):
     plot_format = _check_paths(args)
     mech, solver = _load_mechanism(args)
     active = list(mech.active_joints)
-    kinds = _kinds(mech)
+    kinds = mech.active_kinds
     unwrapped = None
     try:
         # every joint of the mechanism, those without a coordinate too (their columns are
@@ -875,8 +873,8 @@ def run(args, stdout, stderr, signals=None):
         for note in traj.notes:
             print(f'{PROG}: note: {args.input}: {note}', file=stderr)
         if getattr(args, 'unwrap', False):
-            revolute = [j for j, kind in zip(active, kinds) if kind == 'revolute']
-            unwrapped = trajectory_io.unwrap_positions(traj, revolute)
+            wrapping = [j for j, kind in zip(active, kinds) if kind.wraps]
+            unwrapped = trajectory_io.unwrap_positions(traj, wrapping)
             print(f'{PROG}: note: --unwrap: ' + (', '.join(
                 f'{col}: {r:,} row(s) shifted by a multiple of 2 pi ({w:,} wrap(s))'
                 for col, (r, w) in unwrapped.items()) or 'no revolute active joint to unwrap'),

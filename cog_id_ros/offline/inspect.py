@@ -247,7 +247,7 @@ def _joint_kinds(mech):
     """{joint name: type} of every joint: those with a coordinate, then the spherical,
     universal and fixed ones."""
     kinds = dict(zip(mech.joints, mech.joint_types))
-    kinds.update((spec.name, spec.kind) for spec in getattr(mech, 'closure_specs', ()))
+    kinds.update((spec.name, spec.kind.name) for spec in getattr(mech, 'closure_specs', ()))
     return kinds
 
 
@@ -276,12 +276,6 @@ def format_header(mech, params_file):
             f'  {len(mech.links)} moving links ({mass:.6g} kg), {len(kinds)} joints ({by_kind}), '
             f"{loops} loop{'' if loops == 1 else 's'}, {mech.dof} DOF; gravity "
             f"[{', '.join(f'{g:g}' for g in mech.gravity)}] m/s^2"]
-
-
-#: what a spherical, universal or fixed joint in the spanning tree adds to the coordinates
-HIDDEN = {'universal': 'hidden coordinates: 2 angles',
-          'spherical': 'hidden coordinates: a quaternion',
-          'fixed': 'no coordinate'}
 
 
 def tree_hops(mech):
@@ -401,10 +395,6 @@ def _cycle_text(mech, loop, hops):
     return ' '.join(words)
 
 
-#: closure equations of a loop-closing joint of each kind (a revolute or prismatic one: 6)
-EQUATIONS = {'spherical': 3, 'universal': 4, 'fixed': 6, 'unit': 1}
-
-
 def format_spherical_chains(mech):
     """What the solver takes as spherical joints: chains of three revolute joints through
     two massless links (core/spherical_chains.py), and the coordinates that leaves it."""
@@ -412,7 +402,7 @@ def format_spherical_chains(mech):
     if not chains:
         return []
     solver = mech.solver_mechanism
-    equations = sum(EQUATIONS.get(lp.kind, 6) for lp in solver.model.constraints)
+    equations = sum(lp.kind.closure_equations for lp in solver.model.constraints)
     text = (f'solved as spherical joints: {len(chains)} chain(s) of three revolute joints '
             f'through massless links (' +
             '; '.join(f"{', '.join(c.joints)}" for c in chains) +
@@ -453,19 +443,17 @@ def format_actuation(mech):
 
 
 def _hidden_text(mech):
-    """What the hidden coordinates are: the tree's universal and spherical joints'."""
-    kinds = _joint_kinds(mech)
-    in_tree = [name for name in closure_joints_in_tree(mech) if kinds[name] != 'fixed']
-    universal = sum(kinds[name] == 'universal' for name in in_tree)
-    spherical = sum(kinds[name] == 'spherical' for name in in_tree)
+    """What the hidden coordinates are: those of the tree's joints without a coordinate
+    of their own (their kinds' ``hidden_detail``), kinds of fewer hidden ones first."""
+    in_tree = closure_joints_in_tree(mech)
+    counts = {}
+    for spec in getattr(mech, 'closure_specs', ()):
+        if spec.name in in_tree and spec.kind.hidden:
+            counts.setdefault(spec.kind.name, [spec.kind, 0])[1] += 1
     parts = []
-    if universal:
-        parts.append('2 angles of the universal joint in the tree' if universal == 1 else
-                     f'2 angles each of the {universal} universal joints in the tree')
-    quaternion = 'a quaternion (4 numbers; |q| = 1 is a closure equation)'
-    if spherical:
-        parts.append(f'{quaternion} of the spherical joint in the tree' if spherical == 1
-                     else f'{quaternion} each of the {spherical} spherical joints in the tree')
+    for kind, n in sorted(counts.values(), key=lambda kind_n: len(kind_n[0].hidden)):
+        parts.append(f'{kind.hidden_detail} of the {kind.name} joint in the tree' if n == 1
+                     else f'{kind.hidden_detail} each of the {n} {kind.name} joints in the tree')
     return '; '.join(parts)
 
 
@@ -479,7 +467,7 @@ def joint_rows(mech):
     for j, name in enumerate(mech.joints):
         given, assembled = mech.initial_positions[j], mech.assembled_positions[j]
         kind = mech.joint_types[j]
-        unit = 'rad' if kind == 'revolute' else 'm'
+        unit = mech.joint_specs[j].kind.unit
         moved = abs(assembled - given)
         warning = None
         if j in mech.active_index:
@@ -513,11 +501,11 @@ def closure_rows(mech):
         if spec.name in closing:
             role = f'passive, closes loop {closing[spec.name]}'
         elif spec.name in in_tree:
-            role = f'in the tree ({HIDDEN[spec.kind]})'
+            role = f'in the tree ({spec.kind.hidden_summary})'
         else:                # (the core puts every one in the tree or a loop)
             role = 'passive'
-        rows.append((spec.name, spec.kind, role, '-', '-', '-',
-                     'hidden' if spec.name in in_tree and spec.kind != 'fixed'
+        rows.append((spec.name, spec.kind.name, role, '-', '-', '-',
+                     'hidden' if spec.name in in_tree and spec.kind.hidden
                      else 'no coordinate'))
     return rows
 
@@ -566,11 +554,11 @@ def _signed(value):
 
 
 def _far_text(mech):
-    from ..core import mechanism as mechanism_module
-    text = f'threshold {mechanism_module.FAR_ANGLE:g} rad'
-    prismatic = [j for j, kind in enumerate(mech.joint_types) if kind == 'prismatic']
-    if prismatic:
-        text += f', {mech.far_move_limit(prismatic[0])[0]:.3g} m'
+    from ..core import assembly
+    text = f'threshold {assembly.FAR_ANGLE:g} rad'
+    lengths = [j for j in range(len(mech.joints)) if mech.far_move_limit(j)[1] == 'm']
+    if lengths:
+        text += f', {mech.far_move_limit(lengths[0])[0]:.3g} m'
     return text
 
 

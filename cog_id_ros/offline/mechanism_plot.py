@@ -16,6 +16,7 @@ pyplot, no display, no global backend switch.
 
 import numpy as np
 
+from ..core import joints
 from ..core import kinematics as kin
 from ..core import spatial as sp
 
@@ -50,7 +51,6 @@ ACTIVE_COLOR = '#d62728'
 CLOSING_COLOR = '#ff7f0e'
 BASE_COLOR = '#333333'
 PLATFORM_COLOR = '#5f7f9f'
-MARKERS = {'revolute': 'o', 'prismatic': 's'}       # the others: 'D'
 #: link colours: matplotlib's tab10 without its red (the active joints are red)
 PALETTE = ('#1f77b4', '#ff7f0e', '#2ca02c', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f',
            '#bcbd22', '#17becf')
@@ -89,9 +89,10 @@ class Pose:
     frames (a :class:`kinematics.Frames`, e.g. :func:`frames_from_cog_poses`).
 
     ``joints``: per joint (with a coordinate, then the spherical, universal and fixed ones)
-    a dict with name, kind, active, closing, parent_point, child_point, axes (world unit
-    vectors). ``links``: per moving link (name, attachment points (k, 3), cog (3,), mass);
-    the solver's own massless links (the cross of a universal joint in the tree) are not
+    a dict with name, kind (its kind object, core/joints.py: how it is drawn), active,
+    closing, parent_point, child_point, axes (world unit vectors). ``links``: per moving
+    link (name, attachment points (k, 3), cog (3,), mass); the solver's own massless links
+    (the cross of a universal joint in the tree) are not
     among them. ``base_points``: (k, 3) attachment points on the base link.
     """
 
@@ -108,8 +109,8 @@ class Pose:
             points[spec.parent].append(parent_point)
             points[spec.child].append(child_point)
             rot = kin.vector_to_base(frames, spec.parent, sp.mat_vec(
-                sp.rpy_matrix(spec.parent_rpy), spec.axis))
-            axes = [] if spec.kind in ('spherical', 'fixed') else [np.array(rot)]
+                sp.rpy_matrix(spec.parent_rpy), spec.kind.axis))
+            axes = [np.array(rot)] if spec.kind.draws_axis else []
             self.joints.append(dict(name=spec.name, kind=spec.kind,
                                     active=spec.name in active, closing=spec.name in closing,
                                     parent_point=parent_point, child_point=child_point,
@@ -151,11 +152,12 @@ def _distinct(points, tolerance):
 def planar_normal(mech, pose):
     """The normal of the plane a planar mechanism moves in, or None for a spatial one:
     every revolute axis parallel to it and every prismatic axis perpendicular, no
-    spherical or universal joint. Without a revolute joint, the plane of the points."""
-    if any(j['kind'] in ('spherical', 'universal') for j in pose.joints):
+    spherical or universal joint (each kind says where its axis lies in a planar mechanism,
+    ``planar_axis``). Without a revolute joint, the plane of the points."""
+    if any(j['kind'].planar_axis is None for j in pose.joints):
         return None
-    revolute = [j['axes'][0] for j in pose.joints if j['kind'] == 'revolute']
-    prismatic = [j['axes'][0] for j in pose.joints if j['kind'] == 'prismatic']
+    revolute = [j['axes'][0] for j in pose.joints if j['kind'].planar_axis == 'normal']
+    prismatic = [j['axes'][0] for j in pose.joints if j['kind'].planar_axis == 'in_plane']
     if revolute:
         normal = revolute[0] / np.linalg.norm(revolute[0])
     else:
@@ -352,13 +354,13 @@ def _legend_handles(mech, pose, ghosts):
         Line2D([], [], color='#4c72b0', lw=0, marker='o', markeredgecolor='black',
                markersize=7, label='COG (area ~ mass)'),
     ]
-    kinds = {j['kind'] for j in pose.joints}
-    if 'prismatic' in kinds:
-        handles.append(Line2D([], [], color='black', lw=0, marker='s', markerfacecolor='white',
-                              markersize=8, label='prismatic joint'))
-    if kinds - {'revolute', 'prismatic'}:
-        handles.append(Line2D([], [], color='black', lw=0, marker='D', markerfacecolor='white',
-                              markersize=7, label='spherical / universal / fixed'))
+    shown = {j['kind'].name for j in pose.joints}
+    legends = {kind.legend: kind.marker for kind in joints.KINDS.values()
+               if kind.name in shown and kind.legend}
+    for label, marker in legends.items():
+        handles.append(Line2D([], [], color='black', lw=0, marker=marker,
+                              markerfacecolor='white', markersize=7 if marker == 'D' else 8,
+                              label=label))
     if ghosts:
         handles.append(Line2D([], [], color='gray', lw=1.5, alpha=0.4,
                               label='snapshots (lighter: earlier)\nt = '
@@ -522,8 +524,8 @@ def _draw_links(view, pose, colors, alpha=1.0, width=None, fill=True):
                       solid_joinstyle='round')
             if fill:
                 view.polygon(points, color, 0.25 * alpha)
-    for j in pose.joints:           # a prismatic joint's stroke: parent to child attachment
-        if j['kind'] == 'prismatic':
+    for j in pose.joints:   # a prismatic joint's stroke: parent to child attachment (apart)
+        if not j['kind'].origins_coincide:
             view.line(np.vstack([j['parent_point'], j['child_point']]), color='#555555',
                       lw=1.2, ls=':', alpha=alpha)
 
@@ -565,7 +567,7 @@ def _draw_cogs(view, pose, colors):
 
 def _draw_joints(view, pose):
     for j in pose.joints:
-        marker = MARKERS.get(j['kind'], 'D')
+        marker = j['kind'].marker
         face = ACTIVE_COLOR if j['active'] else 'white'
         size = 80 if j['active'] else 45
         view.scatter(j['parent_point'], marker=marker, s=size, facecolors=face,

@@ -228,7 +228,7 @@ class CogIdNode(Node):
         self.setpoint_timeout = cfg['setpoint_timeout']
         self.timeout_behavior = cfg['timeout_behavior']
         self.warning_period = cfg['warning_period']
-        self.unwrap = [cfg['unwrap_angles'] and t == 'revolute' for t in self.active_types]
+        self.unwrap = [cfg['unwrap_angles'] and kind.wraps for kind in mech.active_kinds]
         self.max_step = cfg['max_setpoint_step']
         self.max_stamp_lead_ns = cfg['max_stamp_lead'] * NANOSECONDS \
             if math.isfinite(cfg['max_stamp_lead']) else math.inf
@@ -1171,8 +1171,8 @@ def params_file_problem(argv: list[str]) -> str | None:
 
     rcl's own message names a line of the file, not the parameter, and comes with a
     second log line; the files are read here first, by the API's reader and its one rule of
-    what rcl refuses (:mod:`cog_id_ros.params_file`: ``read_document``, numbers read as rcl
-    reads them, and ``check_rcl_values``: arrays that mix integers and doubles or other
+    what rcl refuses (:mod:`cog_id_ros.description.params_file`: ``read_document``, numbers
+    read as rcl reads them, and ``check_rcl_values``: arrays that mix integers and doubles or other
     types), so the node and ``Mechanism.from_params_file`` refuse the same files with the
     same message. Keys written twice are left to rcl (the last one wins).
     """

@@ -17,7 +17,7 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
-from ..core import MechanismConfigError
+from ..core import MechanismConfigError, joints
 
 #: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters):
 #: the native form (links.*, joints.*) and the URDF form (loop_closures.*; docs/urdf.md)
@@ -36,8 +36,9 @@ TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
 #: InverseDynamics(backend=...) choices
 BACKENDS = ('auto', 'native', 'python', 'reference')
 
-#: max_setpoint_step per joint type when the parameter is not given (rad, m)
-DEFAULT_MAX_STEP = {'revolute': 1.0, 'prismatic': 0.1}
+#: max_setpoint_step when the parameter is not given, by the unit of the joint's coordinate
+#: (its kind's ``unit``: an angle, a length)
+DEFAULT_MAX_STEP = {'rad': 1.0, 'm': 0.1}
 
 #: QoS overrides the node honours: the policies and their values (depth: 1..MAX_QOS_DEPTH)
 QOS_OVERRIDE_VALUES = {
@@ -237,9 +238,9 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'a stream is taken as received. false: positions are used as received'),
     NodeParameter(
         'max_setpoint_step', 'double[]', None, 'per_joint', what='step',
-        per_joint_default=lambda joint_type: DEFAULT_MAX_STEP[joint_type],
-        default_text=f'{DEFAULT_MAX_STEP["revolute"]!r} rad revolute, '
-                     f'{DEFAULT_MAX_STEP["prismatic"]!r} m prismatic',
+        per_joint_default=lambda joint_type: DEFAULT_MAX_STEP[joints.kind(joint_type).unit],
+        default_text=f'{DEFAULT_MAX_STEP["rad"]!r} rad revolute, '
+                     f'{DEFAULT_MAX_STEP["m"]!r} m prismatic',
         description='rad or m: within a stream, a setpoint that moves an active joint farther '
                     'than this from the previous accepted one (after unwrapping) is rejected '
                     '(`jump`) and the estimator restarts, so the next setpoint starts a new '

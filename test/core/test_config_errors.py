@@ -320,7 +320,7 @@ def test_a_huge_axis_is_normalised_not_zeroed():
     became a zero axis silently; it is the same axis as [0, 0, 1]."""
     big = with_changes(from_yaml(PAPER_A), joints__joint2__axis=[0.0, 0.0, 1e308])
     mech = cog_id_ros.Mechanism.from_parameters(big)
-    assert mech.joint_specs[1].axis == (0.0, 0.0, 1.0)
+    assert mech.joint_specs[1].kind.axis == (0.0, 0.0, 1.0)
 
 
 def test_the_largest_values_within_the_bounds_give_finite_torques():
@@ -504,7 +504,7 @@ def test_a_tiny_axis_is_a_direction_like_any_other():
     as zero-length)."""
     params = with_changes(from_yaml(PAPER_A), joints__joint2__axis=[0.0, 0.0, 1e-200])
     mech = cog_id_ros.Mechanism.from_parameters(params)
-    assert mech.joint_specs[1].axis == (0.0, 0.0, 1.0)
+    assert mech.joint_specs[1].kind.axis == (0.0, 0.0, 1.0)
 
 
 @pytest.mark.parametrize('name', ['mechanism__gravity', 'mechanism__closure_tolerance',

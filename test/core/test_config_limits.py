@@ -12,6 +12,7 @@ import yaml
 
 import cog_id_ros
 from cog_id_ros.core import mechanism as mechanism_module
+from cog_id_ros.core.joints import Revolute
 from cog_id_ros.core.kinematics import BASE, JointSpec, KinematicModel
 
 
@@ -163,8 +164,8 @@ def test_a_file_far_above_the_limits_is_refused_before_anything_is_built(tmp_pat
 
 
 def _chain_specs(n):
-    return [JointSpec(f'j{i}', True, BASE if i == 0 else i - 1, i, (0.1, 0.0, 0.0),
-                      (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    return [JointSpec(f'j{i}', Revolute((0.0, 0.0, 1.0)), BASE if i == 0 else i - 1, i,
+                      (0.1, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
             for i in range(n)]
 
 

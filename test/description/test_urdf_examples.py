@@ -60,7 +60,7 @@ def native_configs(urdf_tree=True):
         if 'robot_description' in params or 'mechanism.urdf_file' in params:
             continue
         tree = Mechanism.from_parameters(params).model.edges
-        if all(e.kind in ('revolute', 'prismatic') for e in tree) == urdf_tree:
+        if all(e.kind.name in ('revolute', 'prismatic') for e in tree) == urdf_tree:
             names.append(os.path.basename(path))
     return names
 
@@ -105,7 +105,7 @@ def export_urdf(params):
         spec = mech.joint_specs[edge.joint]
         inner = (spec.parent_xyz, spec.parent_rpy)      # on edge.parent if written outwards
         outer = (spec.child_xyz, spec.child_rpy)
-        axis = spec.axis
+        axis = spec.kind.axis
         if edge.sign < 0:                               # written towards the base
             inner, outer, axis = outer, inner, tuple(-a for a in axis)
         assert (spec.parent, spec.child) == ((edge.parent, edge.child) if edge.sign > 0 else
@@ -120,7 +120,7 @@ def export_urdf(params):
             raise ValueError(f'{spec.name}: a one-sided position limit has no URDF form')
         # URDF: a revolute joint without position limits is continuous; revolute and
         # prismatic joints need a <limit> (urdfdom), one without lower/upper sets none here
-        kind = spec.kind if spec.kind == 'prismatic' or limited else 'continuous'
+        kind = spec.kind.name if spec.kind.name == 'prismatic' or limited else 'continuous'
         limit = ''
         if kind != 'continuous' or effort < math.inf:
             bounds = f'lower="{lower!r}" upper="{upper!r}" ' if limited else ''
@@ -168,17 +168,17 @@ def export_urdf(params):
     for name in closures:
         spec = specs[name]
         prefix = f'loop_closures.{name}.'
-        out[prefix + 'type'] = spec.kind
+        out[prefix + 'type'] = spec.kind.name
         out[prefix + 'parent'] = name_of[spec.parent]
         out[prefix + 'child'] = name_of[spec.child]
         out[prefix + 'parent_xyz'], out[prefix + 'parent_rpy'] = _express(
             new[spec.parent], spec.parent_xyz, spec.parent_rpy)
         out[prefix + 'child_xyz'], out[prefix + 'child_rpy'] = _express(
             new[spec.child], spec.child_xyz, spec.child_rpy)
-        if spec.kind in ('revolute', 'prismatic', 'universal'):
-            out[prefix + 'axis'] = [float(a) for a in spec.axis]
-        if spec.kind == 'universal':
-            out[prefix + 'axis2'] = [float(a) for a in spec.axis2]
+        if spec.kind.name in ('revolute', 'prismatic', 'universal'):
+            out[prefix + 'axis'] = [float(a) for a in spec.kind.axis]
+        if spec.kind.name == 'universal':
+            out[prefix + 'axis2'] = [float(a) for a in spec.kind.axis2]
     for name, value in zip(mech.joints, mech.initial_positions):
         out[f'mechanism.initial_positions.{name}'] = float(value)
     return urdf, out

@@ -113,7 +113,8 @@ def link_name(mech, link):
 
 def declared_joints(mech):
     """{joint: (type, parent link name, child link name)} as the parameter file has them."""
-    return {spec.name: (spec.kind, link_name(mech, spec.parent), link_name(mech, spec.child))
+    return {spec.name: (spec.kind.name, link_name(mech, spec.parent),
+                        link_name(mech, spec.child))
             for spec in list(mech.joint_specs) + list(mech.closure_specs)}
 
 
@@ -127,7 +128,7 @@ def expected_tree(mech):
     for edge in model.edges:
         if edge.child >= n_real:
             assert model.link_names[edge.child] == f'{edge.name}.cross'
-            assert edge.kind == 'revolute' and edge.joint >= len(mech.joints)
+            assert edge.kind.name == 'revolute' and edge.joint >= len(mech.joints)
             continue
         parent = edge.parent
         if parent >= n_real:             # the second hop of a universal joint in the tree
@@ -194,8 +195,8 @@ def check_closure_rows(out, mech):
     for spec in mech.closure_specs:
         assert (spec.name in closes) != (spec.name in in_tree), spec.name
         role = (f'passive, closes loop {closes[spec.name]}' if spec.name in closes
-                else IN_TREE[spec.kind])
-        assert re.search(rf'^  {spec.name}\s+{spec.kind}\s+{re.escape(role)}\s+-', out,
+                else IN_TREE[spec.kind.name])
+        assert re.search(rf'^  {spec.name}\s+{spec.kind.name}\s+{re.escape(role)}\s+-', out,
                          re.MULTILINE), (spec.name, role)
     for unit in mech.model.units:             # a quaternion of a spherical joint in the tree
         assert unit.name in in_tree and unit.name not in closes
@@ -313,7 +314,7 @@ def test_joints_without_coordinate_in_the_tree(case, tmp_path):
     assert [name for name, *_ in pose.links] == list(mech.links)
     assert {j['name'] for j in pose.joints} == set(mech.joints) | set(mech.closure_joints)
     for j in pose.joints:                # every joint closed at the assembled pose
-        if j['kind'] != 'prismatic':
+        if j['kind'].name != 'prismatic':
             assert np.linalg.norm(j['parent_point'] - j['child_point']) < 1e-9, j['name']
 
 
@@ -379,7 +380,7 @@ def test_trajectory_snapshots_with_hidden_coordinates(name, tmp_path, capsys):
                                                                               rotations))
         for j in pose.joints:            # the links' poses close every joint there
             gap = np.linalg.norm(j['parent_point'] - j['child_point'])
-            if j['kind'] == 'prismatic':
+            if j['kind'].name == 'prismatic':
                 assert gap == pytest.approx(abs(q[mech.joints.index(j['name'])]), abs=1e-9)
             else:
                 assert gap < 1e-9, (t, j['name'])
@@ -412,7 +413,7 @@ def test_joint_points_close_the_loops():
     pose = mechanism_plot.Pose(mech, mech.assembled_positions)
     for joint in pose.joints:
         gap = np.linalg.norm(joint['parent_point'] - joint['child_point'])
-        if joint['kind'] == 'revolute':
+        if joint['kind'].name == 'revolute':
             assert gap < 1e-9, joint['name']
         else:          # prismatic: apart by the joint coordinate
             q = mech.assembled_positions[mech.joints.index(joint['name'])]
