@@ -67,6 +67,14 @@ def trajectory_processes(pid):
     return found
 
 
+def process_state(pid):
+    """The state letter of process ``pid`` (R, S, T stopped, Z, ...), '' once it is gone."""
+    try:
+        return pathlib.Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except (OSError, IndexError):
+        return ''
+
+
 def in_node(rclpy_context, namespace, **params):
     """A CogIdNode in this process (not started: no threads), for unit-level checks."""
     from mechanisms import from_yaml
@@ -158,9 +166,8 @@ def test_a_stopped_trajectory_process_is_killed_and_replaced(ros_process, probe_
     assert kv['trajectory_in_progress'] == 'false', kv
     # (the log line reaches this process through a pipe, the count through DDS: either first)
     assert proc.wait_for_output('did not answer the trajectory within', 10), proc.output
-    assert wait_until(lambda: all(not os.path.exists(f'/proc/{pid}') or
-                                  pathlib.Path(f'/proc/{pid}/stat').read_text().split()[2] == 'Z'
-                                  for pid in stopped), 10), 'the stopped process lives on'
+    assert wait_until(lambda: all(process_state(pid) in ('', 'Z') for pid in stopped), 10), \
+        'the stopped process lives on'
     probe.trajectories.publish(make_trajectory(['joint3'], q[:3], q[:3] * 0, q[:3] * 0))
     assert wait_until(lambda: len(probe.effort_trajectories) == 2, timeout=90), proc.output
     # and a node whose trajectory process is stopped ends on SIGINT, without waiting for it
@@ -189,8 +196,7 @@ def test_sigint_during_a_hung_compile_stops_the_node_at_once(ros_process, tmp_pa
     assert time.monotonic() - began < 5, f'{time.monotonic() - began:.1f} s to stop'
     assert 'Traceback' not in proc.output, proc.output
     for pid in map(int, pids.read_text().split()):
-        assert wait_until(lambda: not os.path.exists(f'/proc/{pid}') or
-                          pathlib.Path(f'/proc/{pid}/stat').read_text().split()[2] == 'Z', 5), \
+        assert wait_until(lambda: process_state(pid) in ('', 'Z'), 5), \
             f'compiler {pid} left running'
 
 
@@ -208,6 +214,7 @@ def test_setpoints_older_than_max_setpoint_age_are_dropped(ros_process, probe_fo
     probe.wait_effort(base)
     os.kill(proc.proc.pid, signal.SIGSTOP)
     try:
+        assert wait_until(lambda: process_state(proc.proc.pid) == 'T', 10)   # stopped now
         old = stream(probe, [1.4] * 5, base + NS // 100, step_ns=NS // 100)
         time.sleep(1.0)
     finally:
