@@ -4,6 +4,7 @@ that imports it back. Read from the source (every import statement, at the top o
 or inside a function: a lazy import is an import), not from what happens to be loaded."""
 import ast
 import os
+import pathlib
 
 PACKAGE = 'cog_id_ros'
 ROOT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), PACKAGE)
@@ -27,7 +28,7 @@ def package_modules():
 def imported(name, path, modules):
     """The package's modules that module ``name`` imports, anywhere in its source. ``from
     X import n`` imports X.n when that is a module, else X (its __init__)."""
-    tree = ast.parse(open(path, encoding='utf-8').read(), path)
+    tree = ast.parse(pathlib.Path(path).read_text(encoding='utf-8'), path)
     is_package = path.endswith('__init__.py')
     found = set()
     for node in ast.walk(tree):
