@@ -5,7 +5,9 @@ values given to the node (params files, ``-p``) or from a table of
 :class:`~.parameters.NodeParameter`, each checked with an error that names it
 (MechanismConfigError: main() turns it into exit status 2 and one line); it checks the
 QoS overrides; and once the node is built (:meth:`ReadOnlyNode.refuse_changes`) it
-refuses every change of a declared parameter with the node's own reason.
+refuses every change of a declared parameter with the node's own reason. A subclass
+provides ``internal_error(where, exc)``: the refusal is a guarded callback
+(:func:`.diagnostics.guarded`).
 """
 import contextlib
 from typing import Any, Callable, Iterator, Mapping, Sequence
@@ -17,6 +19,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..core import MechanismConfigError
+from .diagnostics import guarded
 from .parameters import MAX_QOS_DEPTH, QOS_OVERRIDE_VALUES, NodeParameter
 
 #: parameters rclpy declares itself (not unknown to any node)
@@ -147,10 +150,11 @@ class ReadOnlyNode(Node):
         """From now on (the node is built) every parameter change is refused with the
         node's reason. Last in the constructor: declaring a parameter (rclpy declares the
         QoS overrides) runs the on-set callbacks."""
-        self.add_on_set_parameters_callback(self._refusal)
+        self.add_on_set_parameters_callback(self._refuse_parameter_changes)
         self._refusing = True
 
-    def _refusal(self, parameters: Sequence[Parameter]) -> SetParametersResult:
+    @guarded
+    def _refuse_parameter_changes(self, parameters: Sequence[Parameter]) -> SetParametersResult:
         names = ', '.join(p.name for p in parameters)
         return SetParametersResult(successful=False,
                                    reason=f'{names}: {self._read_only_reason}')
@@ -160,12 +164,12 @@ class ReadOnlyNode(Node):
     # runtime gets the node's reason instead (the descriptors still say read-only)
     def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
         if self._refuses(parameter_list):
-            return [self._refusal([p]) for p in parameter_list]
+            return [self._refuse_parameter_changes([p]) for p in parameter_list]
         return super().set_parameters(parameter_list)
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
         if self._refuses(parameter_list):
-            return self._refusal(parameter_list)
+            return self._refuse_parameter_changes(parameter_list)
         return super().set_parameters_atomically(parameter_list)
 
     def _refuses(self, parameter_list: Sequence[Parameter]) -> bool:
