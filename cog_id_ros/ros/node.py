@@ -184,17 +184,18 @@ class CogIdNode(ReadOnlyNode):
         ``info``: rclpy's message info (lost and stale setpoints, :class:`.SetpointStream`).
         """
         start = time.perf_counter()
+        stream, counts = self.setpoints, self.counts
         try:
-            setpoint = self.setpoints.take(msg, info)
-            efforts = self.mode.efforts(setpoint)
+            q, v, a = stream.take(msg, info)      # checked, unwrapped, estimated
+            efforts = self.mode.efforts(q, v, a)
             if not all(map(math.isfinite, efforts)):
                 raise Rejected('out_of_range', 'the torques are not finite at this setpoint')
         except Rejected as exc:
-            self.counts.reject(exc.reason, str(exc))
+            counts.reject(exc.reason, str(exc))
             return
         except CogIdError as exc:
             bad = rejection(exc)
-            self.counts.reject(bad.reason, str(bad))
+            counts.reject(bad.reason, str(bad))
             return
         if self.effort_limits is not None:
             tau = np.array(efforts)
@@ -206,21 +207,18 @@ class CogIdNode(ReadOnlyNode):
         command = self.outputs.command_for(efforts)
         ready = time.perf_counter()
         self.command_pub.publish(command)
-        self.counts.publish_times.append(time.perf_counter() - ready)
-        self.counts.compute_times.append(ready - start)
-        self.effort_pub.publish(self.outputs.state_for(msg.header, setpoint.received,
-                                                       setpoint.velocities, efforts))
-        self.setpoints.accept(setpoint)
-        self.counts.served(setpoint.unstamped)
+        counts.publish_times.append(time.perf_counter() - ready)
+        counts.compute_times.append(ready - start)
+        self.effort_pub.publish(self.outputs.state_for(msg.header, stream.received, v, efforts))
+        stream.accept()
         if self.joint_states_pub is not None:       # last: nothing waits for it
             self._joint_states_countdown -= 1
             if not self._joint_states_countdown:
                 self._joint_states_countdown = self.config.joint_states_decimation
                 try:
-                    self.publish_joint_states(msg.header.frame_id, setpoint.stamp,
-                                              setpoint.velocities)
+                    self.publish_joint_states(msg.header.frame_id, stream.stamp, v)
                 except Exception as exc:   # noqa: BLE001 (the setpoint was served: no rejection)
-                    self.counts.internal_error('joint_states', exc)
+                    counts.internal_error('joint_states', exc)
 
     def publish_joint_states(self, frame_id, stamp, rates):
         """joint_states: the closed pose the solver served the setpoint at (every joint) and

@@ -4,14 +4,15 @@
 in order -- lost and stale messages, the active joints' positions and velocities
 (:func:`.conversions.setpoint_arrays`), the stamp, unwrapping and the step since the
 previous setpoint -- and estimates the velocities and accelerations
-(:mod:`.setpoint_filter`). What comes out, a :class:`Setpoint`, is what every control
-mode serves (:mod:`.modes`); the node calls :meth:`SetpointStream.accept` once its
-command is published, so a setpoint that got no command never enters the estimator.
-The stream also knows when it stopped (:meth:`SetpointStream.stopped_for`: the timeout).
+(:mod:`.setpoint_filter`). What comes out, positions, velocities and accelerations of
+the active joints, is what every control mode serves (:mod:`.modes`); the node calls
+:meth:`SetpointStream.accept` once its command is published, so a setpoint that got no
+command never enters the estimator. The stream also knows when it stopped
+(:meth:`SetpointStream.stopped_for`: the timeout).
 """
 import math
 import time
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable
 
 import numpy as np
 
@@ -21,24 +22,13 @@ from .diagnostics import Counts
 from .setpoint_filter import NANOSECONDS, SetpointFilter, StampError
 
 
-class Setpoint(NamedTuple):
-    """One accepted setpoint of the active joints (lists of floats)."""
-
-    stamp: int                      # ns: the header stamp, or the receipt time if that is 0
-    unstamped: bool                 # the header stamp was 0
-    received: list[float]           # positions as received
-    positions: list[float]          # positions served: unwrapped within the stream
-    given_velocities: list[float] | None   # velocities as received (None: not given)
-    velocities: list[float]         # velocities used: given or estimated
-    accelerations: list[float]      # estimated
-
-
 class SetpointStream:
     """Checks and estimates the setpoints of one stream, by the node's parameters.
 
     ``now_ns``: the node's clock in integer ns; ``publisher_count``: publishers of the
     setpoint topic now (lost setpoints are counted only while there is one); ``counts``
-    and ``logger``: where lost setpoints and estimator restarts are counted and logged.
+    and ``logger``: where served and lost setpoints and estimator restarts are counted
+    and logged.
     """
 
     def __init__(self, config: NodeConfig, counts: Counts, logger: Any,
@@ -61,11 +51,19 @@ class SetpointStream:
         self.stopped = True                   # no setpoint yet, or none for the timeout
         self._stamp_rejections = 0            # consecutive setpoints rejected for their stamp
         self._last_sequence: int | None = None   # publication sequence number of the last one
+        # the setpoint taken last, until the next one (accept() makes it part of the
+        # stream): its stamp in ns (its receipt time when the header's is 0) and its
+        # positions as received; (unstamped, positions served, velocities as received)
+        self.stamp = 0
+        self.received: list[float] = []
+        self._taken: tuple[bool, list[float], list[float] | None] = (False, [], None)
 
-    def take(self, msg: Any, info: dict | None = None) -> Setpoint:
-        """The setpoint of JointState ``msg``; raises Rejected. ``info``: rclpy's message
-        info (the publisher's sequence number counts lost ones, its source timestamp
-        rejects stale ones)."""
+    def take(self, msg: Any, info: dict | None = None
+             ) -> tuple[list[float], list[float], list[float]]:
+        """(positions, velocities, accelerations) of the active joints at the setpoint of
+        JointState ``msg`` (positions unwrapped within the stream, velocities given or
+        estimated); raises Rejected. ``info``: rclpy's message info (the publisher's
+        sequence number counts lost ones, its source timestamp rejects stale ones)."""
         if info is not None:
             self._count_lost(info.get('publication_sequence_number'))
             if self.max_age_ns:
@@ -82,8 +80,9 @@ class SetpointStream:
                            f"{(stamp - now) / NANOSECONDS:.6g} s ahead of the node's clock "
                            f'(max_stamp_lead {self.max_stamp_lead_ns / NANOSECONDS:g} s): '
                            'check the clock of the setpoint source')
+        estimator = self.filter
         try:
-            self.filter.check_stamp(stamp)
+            estimator.check_stamp(stamp)
         except StampError as exc:
             self._stamp_rejections += 1
             if not self.max_stamp_rejections or \
@@ -91,16 +90,20 @@ class SetpointStream:
                 raise Rejected('stamp', str(exc)) from None
             self._restart_after_stamps(exc)
         q = self._positions_used(stamp, received)
-        v_used, a = self.filter.estimate(stamp, q, v)
-        return Setpoint(stamp, unstamped, received, q, v, v_used, a)
+        v_used, a = estimator.estimate(stamp, q, v)
+        self.stamp, self.received, self._taken = stamp, received, (unstamped, q, v)
+        return q, v_used, a
 
-    def accept(self, setpoint: Setpoint) -> None:
-        """``setpoint`` was served: it enters the estimator's history."""
-        self.filter.accept(setpoint.stamp, setpoint.positions, setpoint.given_velocities)
+    def accept(self) -> None:
+        """The setpoint taken last was served: counted, and it enters the estimator's
+        history."""
+        unstamped, q, v = self._taken
+        self.filter.accept(self.stamp, q, v)
         self._stamp_rejections = 0
-        self.last_pose = setpoint.positions
+        self.last_pose = q
         self.last_time = time.monotonic()
         self.stopped = False
+        self.counts.served(unstamped)
 
     def stopped_for(self, timeout: float) -> bool:
         """True, once, when no setpoint was accepted for ``timeout`` s: the stream counts as
