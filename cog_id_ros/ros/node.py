@@ -21,6 +21,7 @@ import contextlib
 import math
 import threading
 import time
+from typing import Any, Callable, ContextManager, Sequence
 
 import numpy as np
 from rclpy.event_handler import PublisherEventCallbacks
@@ -48,7 +49,9 @@ NODE_NAME = 'cog_id_node'
 class CogIdNode(ReadOnlyNode):
     """Inverse dynamics of the mechanism in its parameters, served over topics."""
 
-    def __init__(self, command_line=None, interruptible=contextlib.nullcontext, **kwargs):
+    def __init__(self, command_line: Sequence[str] | None = None,
+                 interruptible: Callable[[], ContextManager] = contextlib.nullcontext,
+                 **kwargs: Any) -> None:
         """``command_line``: the process's arguments (main() passes them), for the directory
         a relative ``mechanism.urdf_file`` is relative to (:func:`.urdf_base_dir`).
         ``interruptible``: a context manager around the parts of start-up that may take long
@@ -61,7 +64,8 @@ class CogIdNode(ReadOnlyNode):
             self.destroy_node()     # no half-built node left to rclpy's clean-up
             raise
 
-    def _build(self, command_line, interruptible):
+    def _build(self, command_line: Sequence[str] | None,
+               interruptible: Callable[[], ContextManager]) -> None:
         overrides = self.override_values()
         base_dir = urdf_base_dir(command_line, self.get_name()) \
             if 'mechanism.urdf_file' in overrides else None
@@ -103,14 +107,14 @@ class CogIdNode(ReadOnlyNode):
             self.get_logger().warning(f'mechanism: {warning}')
         self.refuse_changes()
 
-    def _create_topics(self):
+    def _create_topics(self) -> None:
         qos_options = QoSOverridingOptions.with_default_policies
         # Publishers go without rclpy's default QoS-event handlers: each costs the executor
         # ~7 us per wake-up, and an incompatible subscriber logs the mismatch on its side.
         # The subscriptions keep theirs: a setpoint publisher we cannot hear is reported here.
         lean = PublisherEventCallbacks(use_default_callbacks=False)
 
-        def publisher(msg_type, topic):
+        def publisher(msg_type: type, topic: str) -> Any:
             return self.create_publisher(msg_type, TOPICS[topic].name, control_qos(),
                                          event_callbacks=lean,
                                          qos_overriding_options=qos_options())
@@ -133,19 +137,19 @@ class CogIdNode(ReadOnlyNode):
                                  self.on_trajectory, control_qos(),
                                  qos_overriding_options=qos_options(), raw=True)
 
-    def _ros_now_ns(self):
+    def _ros_now_ns(self) -> int:
         """The node's clock (ROS time: /clock with use_sim_time) in integer ns."""
         return self.get_clock().now().nanoseconds
 
     # --- threads -----------------------------------------------------------------------------
 
-    def start(self):
+    def start(self) -> None:
         """Start the setpoint thread and the trajectory worker (once the node is built)."""
         self.setpoint_loop.start()
         self.trajectory_worker.start()
         self._threads_started = True
 
-    def stopped_threads(self):
+    def stopped_threads(self) -> list[str]:
         """'<thread>: <why>' of every thread of the node that ended although the node did
         not stop it (a bug: none may end silently; /diagnostics says ERROR, and the process
         exits with status 1)."""
@@ -160,7 +164,7 @@ class CogIdNode(ReadOnlyNode):
                                           if failure is not None else 'ended'))
         return out
 
-    def stop(self):
+    def stop(self) -> list[str]:
         """Stop both (before the node is destroyed); returns stopped_threads() as it was
         before (what ended by itself)."""
         stopped = self.stopped_threads()
@@ -169,14 +173,14 @@ class CogIdNode(ReadOnlyNode):
         self.trajectory_worker.stop()
         return stopped
 
-    def internal_error(self, where, exc):
+    def internal_error(self, where: str, exc: BaseException) -> None:
         """An exception in one of the node's callbacks: counted, logged with its type."""
         with self.lock:
             self.counts.internal_error(where, exc)
 
     # --- setpoints ---------------------------------------------------------------------------
 
-    def serve_setpoint(self, msg, info=None):
+    def serve_setpoint(self, msg: JointState, info: dict | None = None) -> None:
         """One JointState setpoint -> effort_command + joint_effort, or a counted rejection.
 
         Called by the setpoint loop's thread with ``self.lock`` held, once per message, in
@@ -220,7 +224,7 @@ class CogIdNode(ReadOnlyNode):
                 except Exception as exc:   # noqa: BLE001 (the setpoint was served: no rejection)
                     counts.internal_error('joint_states', exc)
 
-    def publish_joint_states(self, frame_id, stamp, rates):
+    def publish_joint_states(self, frame_id: str, stamp: int, rates: list[float]) -> None:
         """joint_states: the closed pose the solver served the setpoint at (every joint) and
         the joint rates there from the active ``rates`` used, read from the core."""
         try:
@@ -229,14 +233,14 @@ class CogIdNode(ReadOnlyNode):
             q, qdot = self.solver.last_pose()[0], []
         self.joint_states_pub.publish(self.outputs.pose_for(frame_id, stamp, q, qdot))
 
-    def clip(self, tau):
+    def clip(self, tau: np.ndarray) -> bool:
         """Clip efforts (an array, in place) to +-effort_limits; count it; True if clipped."""
         if self.effort_limits is None or not clip_efforts(tau, self.effort_limits):
             return False
         self.counts.problem('effort_clipped')
         return True
 
-    def _serve_failed(self, exc):
+    def _serve_failed(self, exc: Exception) -> None:
         """A setpoint that failed in a way serve_setpoint does not expect (a bug): no
         command, counted as 'solver' and in internal_errors, logged with its type; the
         next one is served."""
@@ -246,12 +250,12 @@ class CogIdNode(ReadOnlyNode):
     # --- when the stream stops ---------------------------------------------------------------
 
     @guarded
-    def check_timeout(self):
+    def check_timeout(self) -> None:
         """When setpoints stop: restart the estimator and apply timeout_behavior, once."""
         with self.lock:
             self._check_timeout()
 
-    def _check_timeout(self):
+    def _check_timeout(self) -> None:
         config = self.config
         if not self.setpoints.stopped_for(config.setpoint_timeout):
             return
@@ -276,7 +280,7 @@ class CogIdNode(ReadOnlyNode):
     # --- trajectories ------------------------------------------------------------------------
 
     @guarded
-    def on_trajectory(self, raw):
+    def on_trajectory(self, raw: bytes) -> None:
         """A serialized JointTrajectory: refused at once when too long, else handed to the
         trajectory worker (a process of its own; queue of one)."""
         points, most = trajectory_point_count(raw), self.config.max_trajectory_points
@@ -290,12 +294,12 @@ class CogIdNode(ReadOnlyNode):
                 'busy', 'a newer trajectory arrived while it waited for the one being solved '
                         '(one waits at most; the newest wins)', trajectory_point_count(replaced))
 
-    def _trajectory_rejected(self, reason, text, points):
+    def _trajectory_rejected(self, reason: str, text: str, points: int | None) -> None:
         with self.lock:
             self.counts.reject_trajectory(reason, text, points)
 
     @guarded
-    def _trajectory_done(self, result):
+    def _trajectory_done(self, result: tuple) -> None:
         """Called by the trajectory worker's thread with the trajectory process's answer."""
         kind = result[0]
         if kind == 'ok':
@@ -315,7 +319,7 @@ class CogIdNode(ReadOnlyNode):
     # --- diagnostics -------------------------------------------------------------------------
 
     @guarded
-    def publish_diagnostics(self):
+    def publish_diagnostics(self) -> None:
         self.diagnostics.count_same_name_nodes()
         health = self.report.closure_health(self.setpoints.last_pose)   # outside the lock
         with self.lock:
