@@ -35,7 +35,7 @@ from .command_line import urdf_base_dir
 from .config import NodeConfig, start_up_summary
 from .conversions import EffortMessages, Rejected, clip_efforts, rejection, trajectory_point_count
 from .diagnostics import Counts, DiagnosticsPublisher, Report, ThrottledWarnings, guarded
-from .modes import FeedForward
+from .modes import FeedForward, Mode
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
 from .read_only_node import ReadOnlyNode
 from .setpoint_loop import SetpointLoop
@@ -92,7 +92,7 @@ class CogIdNode(ReadOnlyNode):
         self.setpoints = SetpointStream(
             config, self.counts, self.get_logger(), now_ns,
             lambda: self.setpoint_loop.subscription.get_publisher_count())
-        self.mode = FeedForward(self.solver)
+        self.mode: Mode = FeedForward(self.solver)      # setpoint -> efforts
         self.effort_limits = config.effort_limits if config.limited else None  # None: no clip
         self.outputs = EffortMessages(config.active_joints, self.mechanism.joints)
         self._joint_states_countdown = 1      # served setpoints until the next joint_states
