@@ -1,4 +1,4 @@
-"""``python -m cog_id_ros.node``: cog_id_node, whose code is :mod:`cog_id_ros.ros.node`.
+"""``python -m cog_id_ros.node``: cog_id_node, whose main is :mod:`cog_id_ros.ros.main`.
 
 Kept so that the command of the design contract and of existing launch scripts works::
 
@@ -6,7 +6,7 @@ Kept so that the command of the design contract and of existing launch scripts w
 """
 import sys
 
-from .ros.node import main
+from .ros.main import main
 
 __all__ = ['main']
 

@@ -1,13 +1,23 @@
 """cog_id_ros.ros: the ROS 2 face (needs rclpy): the node ``cog_id_node`` and its parts.
 
-  node.py            the node: setpoints in, effort commands out, diagnostics
-  parameters.py      the node's parameters: type, default, bounds, description (one table)
-  topics.py          the node's topics: type, direction, QoS, meaning (one table)
-  setpoint_loop.py   the thread that serves joint_setpoint outside the executor
-  setpoint_filter.py the causal velocity and acceleration estimator of the setpoint stream
-  conversions.py     ROS messages <-> arrays, rejection reasons, the trajectory process
-  stop_signals.py    SIGINT / SIGTERM during start-up
-  player.py          ``cog_id_player``: a CSV trajectory published as setpoints
-  recorder.py        the efforts recorded in a process of their own, and the account of a
-                     run: every setpoint answered and recorded, or where it went
+  node.py              the node's wiring: topics, timers, the callback that serves a setpoint
+  main.py              ``cog_id_node``'s main (usage, start-up)
+  config.py            NodeConfig: what the node reads at start-up, frozen (node and worker)
+  parameters.py        the node's parameters: type, default, bounds, description (one table)
+  topics.py            the node's topics: type, direction, QoS, meaning (one table)
+  setpoint_stream.py   a setpoint message -> the checked, estimated setpoint (or a rejection)
+  setpoint_filter.py   the causal velocity and acceleration estimator of the setpoint stream
+  modes.py             control modes: setpoint -> efforts (FeedForward: inverse dynamics)
+  setpoint_loop.py     the thread that serves joint_setpoint outside the executor
+  trajectory_worker.py trajectories solved in a process of their own
+  diagnostics.py       the counts and /diagnostics status; guarded callbacks, throttled warnings
+  conversions.py       ROS messages <-> arrays, rejection reasons, the one effort clip
+  cdr.py               effort_command serialized by hand (one struct call)
+  read_only_node.py    base of the nodes: parameters read once, then read-only
+  startup.py           run a node: stop signals during start-up, spin, exit status
+  command_line.py      --params-file checks and rcl's messages, naming the parameter
+  stop_signals.py      SIGINT / SIGTERM during start-up
+  player.py            ``cog_id_player``: a CSV trajectory published as setpoints
+  recorder.py          the efforts recorded in a process of their own, and the account of a
+                       run: every setpoint answered and recorded, or where it went
 """

@@ -13,8 +13,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..offline import derivatives
 from . import cdr
-
-NANOSECONDS = 1_000_000_000
+from .setpoint_filter import NANOSECONDS
 
 #: every reason a setpoint or trajectory can be rejected for, as counted in diagnostics
 REASONS = {
@@ -214,6 +213,16 @@ def unwrapped_columns(q, unwrap):
     return out
 
 
+def clip_efforts(tau, limits):
+    """Clip efforts ``tau`` (an array of any shape, in place) to +-``limits`` (one per
+    active joint, the last axis); True if any was clipped. The node's one clip: setpoints,
+    the hold command and trajectories."""
+    if (np.abs(tau) <= limits).all():
+        return False
+    np.clip(tau, -limits, limits, out=tau)
+    return True
+
+
 def nearest_turn(value, reference):
     """``value`` plus the multiple of 2 pi that brings it nearest ``reference``."""
     turns = round((reference - value) / (2.0 * math.pi))
@@ -255,8 +264,8 @@ def solve_trajectory_message(raw, solver, selector, *, unwrap=None, max_step=Non
                              effort_limits=None, max_points=None):
     """A serialized JointTrajectory -> (serialized effort_trajectory, clipped, points).
 
-    The whole trajectory path of the node, run in its trajectory process (see
-    ``cog_id_ros.node.TrajectoryWorker``): deserialise, check, solve in one vectorised
+    The whole trajectory path of the node, run in its trajectory process
+    (:mod:`cog_id_ros.ros.trajectory_worker`): deserialise, check, solve in one vectorised
     core call, clip to ``effort_limits``, build and serialise the answer. Raises Rejected
     (with the number of points in ``points``) for a trajectory that gets no answer.
     """
@@ -289,12 +298,7 @@ def solve_trajectory_message(raw, solver, selector, *, unwrap=None, max_step=Non
     except Rejected as exc:
         exc.points = points
         raise
-    clipped = False
-    if effort_limits is not None:
-        limits = np.asarray(effort_limits, float)
-        if not (np.abs(tau) <= limits).all():
-            np.clip(tau, -limits, limits, out=tau)
-            clipped = True
+    clipped = effort_limits is not None and clip_efforts(tau, np.asarray(effort_limits, float))
     out = effort_trajectory(msg, selector.active_joints, q, qd, qdd, tau)
     return serialize_message(out), clipped, points
 
@@ -348,45 +352,3 @@ class EffortMessages:
         pose.position = positions
         pose.velocity = velocities
         return pose
-
-
-def trajectory_process(conn, config):
-    """Main function of the node's trajectory process (``multiprocessing``, spawn).
-
-    ``config``: ``mechanism`` (the mechanism's parameters), ``active_joints``, ``unwrap``,
-    ``max_step``, ``effort_limits`` (or None), ``max_points``, ``backend``. Reads serialized
-    JointTrajectory messages from ``conn`` until EOF (the node closed its end, or ended),
-    once it has said ('ready',) (its solver is built: the kernels loaded or compiled),
-    and answers each with ('ok', serialized effort_trajectory, clipped, points),
-    ('rejected', reason, text, points) or ('internal', text). Ignores SIGINT: Ctrl-C in a
-    terminal reaches the whole process group, and the node ends this process itself.
-    """
-    import signal
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from ..core import InverseDynamics
-    from ..description import Mechanism
-    solver = InverseDynamics(Mechanism.from_parameters(config['mechanism']),
-                             backend=config.get('backend', 'auto'))
-    selector = JointSelector(config['active_joints'])
-    options = {'unwrap': config['unwrap'], 'max_step': config['max_step'],
-               'effort_limits': config['effort_limits'], 'max_points': config['max_points']}
-    try:
-        conn.send(('ready',))     # loaded: from here on each answer is bounded (the node)
-    except (EOFError, OSError):
-        return
-    while True:
-        try:
-            raw = conn.recv_bytes()
-        except (EOFError, OSError):
-            return
-        try:
-            out, clipped, points = solve_trajectory_message(raw, solver, selector, **options)
-            answer = ('ok', out, clipped, points)
-        except Rejected as exc:
-            answer = ('rejected', exc.reason, str(exc), getattr(exc, 'points', None))
-        except Exception as exc:   # noqa: BLE001 (answer every trajectory)
-            answer = ('internal', f'{type(exc).__name__}: {exc}')
-        try:
-            conn.send(answer)
-        except (EOFError, OSError):
-            return

@@ -321,11 +321,11 @@ def test_an_exception_in_a_timer_callback_is_counted_not_raised(rclpy_context):
     try:
         def broken(*args):
             raise ZeroDivisionError('a bug')
-        node.closure_health = broken
+        node.report.closure_health = broken
         node.publish_diagnostics()
         node._check_timeout = broken
         node.check_timeout()
-        assert node.counts['internal_errors'] == 2
+        assert node.counts.totals['internal_errors'] == 2
     finally:
         node.destroy_node()
 

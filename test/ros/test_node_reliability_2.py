@@ -96,10 +96,10 @@ def test_an_error_then_a_warning_log_from_one_call_site(rclpy_context):
     node = in_node(rclpy_context, '/severity')
     try:
         node.internal_error('trajectory', RuntimeError('the process was killed'))
-        node.reject('non_finite', 'a NaN')                  # a warning after an error
+        node.counts.reject('non_finite', 'a NaN')       # a warning after an error
         node.internal_error('setpoint', RuntimeError('again'))   # and an error after it
-        assert node.counts['internal_errors'] == 2
-        assert node.rejected['non_finite'] == 1
+        assert node.counts.totals['internal_errors'] == 2
+        assert node.counts.rejected['non_finite'] == 1
     finally:
         node.destroy_node()
 
@@ -137,7 +137,7 @@ def test_a_thread_that_died_turns_the_status_to_error(rclpy_context):
         node.setpoint_loop._loop = broken
         node.start()
         assert wait_until(lambda: not node.setpoint_loop.running, 10)
-        status = node.diagnostic_status(0.0, 1.0)
+        status = node.report.status(0.0, 1.0)
         assert status.level == DiagnosticStatus.ERROR
         assert 'setpoint thread: ValueError' in status.message
         assert node.stop() == ['setpoint thread: ValueError: Logger severity cannot be '

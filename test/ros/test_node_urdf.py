@@ -24,7 +24,8 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 import cog_id_ros  # noqa: E402
-from cog_id_ros.ros.node import control_qos, urdf_base_dir  # noqa: E402
+from cog_id_ros.ros.command_line import urdf_base_dir  # noqa: E402
+from cog_id_ros.ros.node import control_qos  # noqa: E402
 from cog_id_ros.ros.player import RECORDER_QOS  # noqa: E402
 
 NS = 1_000_000_000

@@ -1,0 +1,153 @@
+"""The command line of the package's nodes: ``--params-file`` checks and rcl's messages.
+
+rcl refuses a params file with a message that names a line, not the parameter, and logs a
+second line of its own. These helpers read the files first (:func:`params_file_problem`),
+turn what rcl still refuses into one line that names the parameter (:func:`rcl_message`,
+with rcl's own log line held back meanwhile: :class:`StderrHeld`), and say which file a
+relative ``mechanism.urdf_file`` is relative to (:func:`urdf_base_dir`).
+"""
+import os
+import re
+import sys
+import tempfile
+from typing import Any, Sequence
+
+import yaml
+
+from ..core import MechanismConfigError
+from ..description import params_file
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (whitespace runs become one space)."""
+    return ' '.join(str(exc).split())
+
+
+def node_arguments(args: Sequence[str] | None) -> list[str]:
+    """The arguments after the program name (``args`` as rclpy takes them, None: sys.argv)."""
+    return sys.argv[1:] if args is None else list(args[1:])
+
+
+def wants_help(argv: Sequence[str]) -> bool:
+    """``-h`` or ``--help`` before ``--ros-args``."""
+    own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
+    return '-h' in own or '--help' in own
+
+
+def params_file_problem(argv: Sequence[str]) -> str | None:
+    """A sentence naming the first parameter of a ``--params-file`` rcl would refuse, or None.
+
+    rcl's own message names a line of the file, not the parameter, and comes with a
+    second log line; the files are read here first, by the API's reader and its one rule of
+    what rcl refuses (:mod:`cog_id_ros.description.params_file`: ``read_document``, numbers
+    read as rcl reads them, and ``check_rcl_values``: arrays that mix integers and doubles or other
+    types), so the node and ``Mechanism.from_params_file`` refuse the same files with the
+    same message. Keys written twice are left to rcl (the last one wins).
+    """
+    files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
+    for path in files:
+        try:
+            params_file.check_rcl_values(params_file.read_document(path, duplicate_keys=True),
+                                         path)
+        except MechanismConfigError as exc:
+            text = one_line(exc)
+            if exc.parameter == 'params_file':      # the file itself: say it as given
+                text = '--params-file' + text[len('params_file'):]
+            return text
+    return None
+
+
+def urdf_base_dir(command_line: Sequence[str] | None, node_name: str) -> str | None:
+    """The directory a relative ``mechanism.urdf_file`` is relative to: that of the
+    ``--params-file`` that gives it to the node called ``node_name`` (rcl applies the files
+    and ``-p`` rules in their order on the command line: the last one that gives it counts);
+    None (the working directory) when a ``-p`` rule gives it, or nothing does."""
+    base = None
+    args = list(command_line or ())
+    for arg, value in zip(args, args[1:]):
+        if arg == '--params-file':
+            try:
+                given = 'mechanism.urdf_file' in params_file.load_params_file(value, node_name)
+            except MechanismConfigError:
+                given = False
+            if given:
+                base = os.path.dirname(os.path.abspath(value))
+        elif arg in ('-p', '--param') and \
+                value.split(':=', 1)[0].rsplit(':', 1)[-1] == 'mechanism.urdf_file':
+            base = None
+    return base
+
+
+def rcl_message(exc: BaseException) -> str:
+    """rcl's message for a command line it refused, in one line without its source lines;
+    a parse error in a params file names the parameter at the line rcl names."""
+    text = one_line(exc)
+    text = text.replace('failed to initialize rcl: ', '')
+    text = re.sub(r',? at /\S+:\d+', '', text)
+    found = re.search(r"params file: '--params-file (.+?)'.*?line(?:_num)? (\d+)", text)
+    if found:
+        name = _parameter_at_line(found.group(1), int(found.group(2)))
+        if name:
+            return f'{name}: {text}'
+    return text
+
+
+def _parameter_at_line(path: str, line: int) -> str | None:
+    """The dotted name (below ros__parameters) of the entry at ``line`` (1-based) of a
+    params file, or None."""
+    try:
+        with open(path, encoding='utf-8') as stream:
+            root = yaml.compose(stream)
+    except (OSError, yaml.YAMLError):
+        return None
+    best = None
+
+    def walk(node: Any, prefix: str) -> None:
+        nonlocal best
+        if not isinstance(node, yaml.MappingNode):
+            return
+        for key, value in node.value:
+            name = f'{prefix}{key.value}'
+            if key.start_mark.line + 1 <= line <= max(value.end_mark.line + 1,
+                                                     key.start_mark.line + 1):
+                best = name
+                walk(value, name + '.')
+
+    if isinstance(root, yaml.MappingNode):
+        for _, body in root.value:
+            if isinstance(body, yaml.MappingNode):
+                for key, params in body.value:
+                    if key.value == 'ros__parameters':
+                        walk(params, '')
+    return best
+
+
+class StderrHeld:
+    """Holds what C code writes to file descriptor 2 (rcl's "Failed to parse global
+    arguments" log line) until replay(); dropped when the block raises."""
+
+    def __enter__(self) -> 'StderrHeld':
+        self._saved: int | None = None
+        self._file = tempfile.TemporaryFile()
+        try:
+            sys.stderr.flush()
+            self._saved = os.dup(2)
+            os.dup2(self._file.fileno(), 2)
+        except OSError:
+            self._saved = None
+        return self
+
+    def __exit__(self, *exc_info: Any) -> bool:
+        if self._saved is not None:
+            os.dup2(self._saved, 2)
+            os.close(self._saved)
+            self._saved = None
+        return False
+
+    def replay(self) -> None:
+        self._file.seek(0)
+        text = self._file.read()
+        self._file.close()
+        if text:
+            sys.stderr.buffer.write(text)
+            sys.stderr.flush()

@@ -1,0 +1,318 @@
+"""What cog_id_node counts and reports on /diagnostics, and the pieces any node of the
+package uses to report (the guard of its callbacks, throttled warnings, the publisher).
+
+* :class:`Counts`: the counters of the node (``DIAGNOSTIC_KEYS``), the compute and
+  publish times, and what the status of the last period says;
+* :class:`Report`: the node's DiagnosticStatus, from its counts, its setpoint stream and
+  its threads, with the closure health of the last served pose;
+* reusable: :func:`guarded` (no exception of a callback ends the node),
+  :class:`ThrottledWarnings`, :class:`DiagnosticsPublisher` (``/diagnostics`` and the
+  warning about other nodes with the node's name).
+"""
+import collections
+import functools
+import math
+import time
+from typing import Any, Callable
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+from rclpy.event_handler import PublisherEventCallbacks
+
+from ..core import CogIdError
+from .conversions import REASONS, TRAJECTORY_REASONS
+from .topics import DIAGNOSTICS_QOS_DEPTH, TOPICS
+
+#: keys of /diagnostics besides rejected.<reason> and trajectories_rejected.<reason>
+DIAGNOSTIC_KEYS = {
+    'mechanism': 'the mechanism name',
+    'active_joints': 'the active joints, in effort order',
+    'backend': "who computes the kernels: native, python or reference (parameter 'backend')",
+    'setpoints_accepted': 'setpoints served since start',
+    'setpoints_rejected': 'setpoints rejected since start (sum of rejected.<kind>)',
+    'setpoints_lost': 'setpoints the single publisher of joint_setpoint sent that never reached '
+                      'the node (gaps in its sequence numbers, e.g. a full subscription queue)',
+    'stamp_restarts': 'times the estimator restarted after max_stamp_rejections stamp rejections',
+    'setpoints_unstamped': 'accepted setpoints stamped 0, served at their receipt time (its '
+                           'jitter becomes acceleration noise)',
+    'trajectories_accepted': 'trajectories answered since start',
+    'trajectories_rejected': 'trajectories refused since start (sum of '
+                             'trajectories_rejected.<kind>)',
+    'trajectory_in_progress': 'true while a trajectory is being solved',
+    'effort_clipped': 'setpoints, trajectories and hold commands that were clipped',
+    'timeouts': 'times the stream stopped',
+    'internal_errors': 'exceptions the node caught in its own callbacks (a bug: please report)',
+    'nodes_with_this_name': "nodes in the ROS graph with this node's name and namespace "
+                            '(more than 1: every setpoint gets several commands)',
+    'last_closure_residual': 'max closure equation residual at the last served pose, m or rad',
+    'closure_condition_number': 'condition number of the closure Jacobian there',
+    'compute_time_median_us': "from receipt of a setpoint to its command ready to send (the "
+                              "solve and the node's own work), last 1000",
+    'compute_time_max_us': 'the same, maximum',
+    'compute_time_samples': 'setpoints in the two figures above',
+    'publish_time_median_us': "the command's publish (the DDS write to its subscribers) "
+                              'after that, last 1000',
+    'publish_time_max_us': 'the same, maximum',
+    'seconds_since_last_setpoint': 'monotonic seconds since the last accepted setpoint',
+    'last_rejection': 'kind and message of the last rejected setpoint',
+}
+
+#: compute times kept for the diagnostics median and max (the last N setpoints)
+COMPUTE_TIME_WINDOW = 1000
+
+
+def guarded(method: Callable) -> Callable:
+    """A callback of a node that never ends it: an exception is counted and logged
+    (``node.internal_error(name, exc)``)."""
+    @functools.wraps(method)
+    def guarded(self, *args):
+        try:
+            return method(self, *args)
+        except Exception as exc:   # noqa: BLE001 (no callback may end the node)
+            if self.context.ok():
+                self.internal_error(method.__name__, exc)
+            return None
+    return guarded
+
+
+class ThrottledWarnings:
+    """Log a warning at most once a ``period`` (s) per key; count the ones left out."""
+
+    def __init__(self, logger: Any, period: float) -> None:
+        self.logger = logger
+        self.period = period
+        self._warned: dict[str, tuple[float, int]] = {}   # key -> (time, suppressed count)
+
+    def warn(self, key: str, text: str, error: bool = False) -> None:
+        now = time.monotonic()
+        last, suppressed = self._warned.get(key, (-math.inf, 0))
+        if now - last < self.period:
+            self._warned[key] = (last, suppressed + 1)
+            return
+        more = f' ({suppressed} more like it since the last warning)' if suppressed else ''
+        self._warned[key] = (now, 0)
+        # Two call sites, one per severity: rclpy's logger remembers the severity of each call
+        # site and raises ValueError when one site logs at another (an error after a warning
+        # from one line killed the thread that logged it)
+        if error:
+            self.logger.error(text + more)
+        else:
+            self.logger.warning(text + more)
+
+
+class Counts:
+    """What the node counts since start (``DIAGNOSTIC_KEYS``) and in the current period.
+
+    Callers hold the node's lock: the setpoint thread, the trajectory worker's thread and
+    the executor all count here.
+    """
+
+    def __init__(self, warnings: ThrottledWarnings) -> None:
+        self.warnings = warnings
+        self.totals = collections.Counter({'accepted': 0, 'trajectories_accepted': 0,
+                                           'trajectories_rejected': 0, 'effort_clipped': 0,
+                                           'timeouts': 0, 'internal_errors': 0,
+                                           'setpoints_lost': 0, 'stamp_restarts': 0,
+                                           'setpoints_unstamped': 0})
+        self.rejected = collections.Counter(dict.fromkeys(REASONS, 0))
+        self.trajectory_rejected = collections.Counter(
+            dict.fromkeys((*REASONS, *TRAJECTORY_REASONS), 0))
+        self.compute_times: collections.deque = collections.deque(maxlen=COMPUTE_TIME_WINDOW)
+        self.publish_times: collections.deque = collections.deque(maxlen=COMPUTE_TIME_WINDOW)
+        self.last_rejection = ''
+        self.last_was_rejected = False
+        self.period_problems = 0              # rejections + clipping since the last report
+        self.period_unstamped = 0             # setpoints stamped 0 since the last report
+
+    def served(self, unstamped: bool) -> None:
+        """A setpoint was served (``unstamped``: stamped 0, served at its receipt time)."""
+        self.totals['accepted'] += 1
+        self.last_was_rejected = False
+        if unstamped:
+            self._unstamped()
+
+    def _unstamped(self) -> None:
+        """A setpoint stamped 0 was served at its receipt time: counted, warned about (the
+        time between receipts jitters against the motion, and its second difference is in
+        the accelerations: torques many times too large at 1 kHz)."""
+        self.totals['setpoints_unstamped'] += 1
+        self.period_unstamped += 1
+        self.warnings.warn(
+            'unstamped', 'setpoint stamped 0: served at its receipt time, so the jitter of '
+            'receipt times against the motion goes into the estimated accelerations (at 1 kHz, '
+            'torques can be many times too large); stamp each setpoint with the time its '
+            'positions are meant for (header.stamp), or send whole trajectories with their '
+            'velocities and accelerations to joint_trajectory')
+
+    def reject(self, reason: str, text: str) -> None:
+        """Count a rejected setpoint (no command) and warn about it, throttled."""
+        self.rejected[reason] += 1
+        self.last_rejection = f'{reason}: {text}'
+        self.last_was_rejected = True
+        self.period_problems += 1
+        self.warnings.warn(reason, f'setpoint rejected, no command ({reason}): {text}')
+
+    def reject_trajectory(self, reason: str, text: str, points: int | None) -> None:
+        """Count a trajectory that gets no effort_trajectory and warn about it, throttled."""
+        self.totals['trajectories_rejected'] += 1
+        self.trajectory_rejected[reason] += 1
+        self.period_problems += 1
+        size = '' if points is None else f' of {points} points'
+        self.warnings.warn('trajectory.' + reason, f'trajectory{size} rejected ({reason}), no '
+                                                   f'effort_trajectory: {text}')
+
+    def problem(self, key: str, amount: int = 1) -> None:
+        """Count ``amount`` of ``key`` (clipping, lost setpoints): a problem of the period."""
+        self.totals[key] += amount
+        self.period_problems += 1
+
+    def internal_error(self, where: str, exc: BaseException) -> None:
+        """An exception in one of the node's callbacks: counted, logged with its type."""
+        self.problem('internal_errors')
+        try:
+            self.warnings.warn('internal.' + where, f'{where} failed (the node goes on): '
+                               f'{type(exc).__name__}: {exc}', error=True)
+        except Exception:   # noqa: BLE001 (counted: a failing log must not raise again)
+            pass
+
+    def end_period(self) -> tuple[int, int]:
+        """(problems, unstamped setpoints) of the period that ends with this report."""
+        period = (self.period_problems, self.period_unstamped)
+        self.period_problems = self.period_unstamped = 0
+        return period
+
+
+class Report:
+    """cog_id_node's DiagnosticStatus: its counts, its setpoint stream, its threads.
+
+    ``solver``: an InverseDynamics of its own for the closure health of the last served
+    pose, solved once a report (outside the node's lock), so the per-setpoint path stays
+    on the core's lean single-sample call.
+    """
+
+    def __init__(self, node: Any, solver: Any) -> None:
+        self.node = node
+        self.solver = solver
+
+    def closure_health(self, pose: list[float] | None) -> tuple[float, float]:
+        """(closure residual, closure Jacobian condition number) at ``pose``, a served pose;
+        NaN without one, or when the solver refuses it."""
+        if pose is None:
+            return math.nan, math.nan
+        try:
+            result = self.solver.evaluate(pose, on_invalid='skip')
+        except CogIdError:
+            return math.nan, math.nan
+        return float(result.closure_residual[0]), float(result.condition_number[0])
+
+    def status(self, residual: float, condition: float) -> DiagnosticStatus:
+        """The DiagnosticStatus of the node (``residual``, ``condition``: closure_health)."""
+        node = self.node
+        same_name_nodes = node.diagnostics.same_name_nodes
+        status = DiagnosticStatus()
+        status.name = f'{node.get_fully_qualified_name()}: inverse dynamics'
+        status.hardware_id = node.mechanism.name
+        status.level, status.message = self._level(same_name_nodes)
+        values = [('mechanism', node.mechanism.name),
+                  ('active_joints', ', '.join(node.config.active_joints)),
+                  ('backend', node.solver.backend),
+                  *self._counted(),
+                  ('nodes_with_this_name', same_name_nodes),
+                  ('last_closure_residual', f'{residual:.3g}'),
+                  ('closure_condition_number', f'{condition:.4g}'),
+                  *self._times()]
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values]
+        return status
+
+    def _level(self, same_name_nodes: int) -> tuple[bytes, str]:
+        """The level and message: the worst of what the period saw."""
+        counts, stream = self.node.counts, self.node.setpoints
+        problems, unstamped = counts.end_period()
+        stopped = self.node.stopped_threads()
+        if stopped:
+            return DiagnosticStatus.ERROR, (f"stopped serving ({'; '.join(stopped)}): a bug, "
+                                            'please report it; restart the node')
+        if counts.last_was_rejected:
+            return DiagnosticStatus.ERROR, f'last setpoint rejected ({counts.last_rejection})'
+        if problems:
+            return DiagnosticStatus.WARN, (f'{problems} setpoint(s) or trajectories rejected, '
+                                           'clipped or lost, or internal errors, in the last '
+                                           'period')
+        if same_name_nodes > 1:
+            return DiagnosticStatus.WARN, (f'{same_name_nodes} nodes with this name: every '
+                                           'setpoint gets a command from each')
+        if unstamped:
+            return DiagnosticStatus.WARN, (f'{unstamped} setpoint(s) stamped 0 in the last '
+                                           'period: accelerations estimated from receipt times '
+                                           '(noisy)')
+        if stream.last_time is None:
+            return DiagnosticStatus.OK, 'ready, no setpoint yet'
+        if stream.stopped:
+            return DiagnosticStatus.OK, (f'setpoint stream stopped '
+                                         f'({self.node.config.timeout_behavior})')
+        return DiagnosticStatus.OK, 'serving setpoints'
+
+    def _counted(self) -> list[tuple[str, Any]]:
+        counts = self.node.counts
+        c = counts.totals
+        return [('setpoints_accepted', c['accepted']),
+                ('setpoints_rejected', sum(counts.rejected.values())),
+                *((f'rejected.{reason}', count) for reason, count in counts.rejected.items()),
+                ('setpoints_lost', c['setpoints_lost']),
+                ('stamp_restarts', c['stamp_restarts']),
+                ('setpoints_unstamped', c['setpoints_unstamped']),
+                ('trajectories_accepted', c['trajectories_accepted']),
+                ('trajectories_rejected', c['trajectories_rejected']),
+                *((f'trajectories_rejected.{reason}', count)
+                  for reason, count in counts.trajectory_rejected.items()),
+                ('trajectory_in_progress', str(self.node.trajectory_worker.busy).lower()),
+                ('effort_clipped', c['effort_clipped']),
+                ('timeouts', c['timeouts']),
+                ('internal_errors', c['internal_errors'])]
+
+    def _times(self) -> list[tuple[str, Any]]:
+        counts, last = self.node.counts, self.node.setpoints.last_time
+        times = np.array(counts.compute_times) * 1e6
+        sends = np.array(counts.publish_times) * 1e6
+        since = '' if last is None else f'{time.monotonic() - last:.3f}'
+        return [('compute_time_median_us', f'{np.median(times):.1f}' if times.size else ''),
+                ('compute_time_max_us', f'{times.max():.1f}' if times.size else ''),
+                ('compute_time_samples', times.size),
+                ('publish_time_median_us', f'{np.median(sends):.1f}' if sends.size else ''),
+                ('publish_time_max_us', f'{sends.max():.1f}' if sends.size else ''),
+                ('seconds_since_last_setpoint', since),
+                ('last_rejection', counts.last_rejection)]
+
+
+class DiagnosticsPublisher:
+    """A node's ``/diagnostics`` (keep-last DIAGNOSTICS_QOS_DEPTH), and the count of the
+    nodes in the ROS graph with its name and namespace (each would answer every message
+    the node answers too)."""
+
+    def __init__(self, node: Any, event_callbacks: PublisherEventCallbacks) -> None:
+        self.node = node
+        self.same_name_nodes = 1
+        self.publisher = node.create_publisher(
+            DiagnosticArray, TOPICS['/diagnostics'].name, DIAGNOSTICS_QOS_DEPTH,
+            event_callbacks=event_callbacks)
+
+    def count_same_name_nodes(self) -> int:
+        """Nodes with this node's name and namespace; a warning when there are others
+        (when their number changes)."""
+        node = self.node
+        me = (node.get_name(), node.get_namespace())
+        count = sum(1 for entry in node.get_node_names_and_namespaces() if tuple(entry) == me)
+        count = max(count, 1)
+        if count > 1 and count != self.same_name_nodes:
+            node.get_logger().warning(
+                f'{count} nodes named {node.get_fully_qualified_name()} in the ROS graph: every '
+                'setpoint gets a command from each; give each node a namespace of its own '
+                '(-r __ns:=/name) or stop the others')
+        self.same_name_nodes = count
+        return count
+
+    def publish(self, status: DiagnosticStatus) -> None:
+        msg = DiagnosticArray()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.status = [status]
+        self.publisher.publish(msg)

@@ -1,0 +1,177 @@
+"""A node whose parameters are read once at start-up and are read-only afterwards.
+
+:class:`ReadOnlyNode` is the base of the package's nodes: it declares parameters from the
+values given to the node (params files, ``-p``) or from a table of
+:class:`~.parameters.NodeParameter`, each checked with an error that names it
+(MechanismConfigError: main() turns it into exit status 2 and one line); it checks the
+QoS overrides; and once the node is built (:meth:`ReadOnlyNode.refuse_changes`) it
+refuses every change of a declared parameter with the node's own reason. A subclass
+provides ``internal_error(where, exc)``: the refusal is a guarded callback
+(:func:`.diagnostics.guarded`).
+"""
+import contextlib
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+import rclpy.exceptions
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from ..core import MechanismConfigError
+from .diagnostics import guarded
+from .parameters import MAX_QOS_DEPTH, QOS_OVERRIDE_VALUES, NodeParameter
+
+#: parameters rclpy declares itself (not unknown to any node)
+RCLPY_PARAMETERS = ('use_sim_time', 'start_type_description_service')
+
+
+class ReadOnlyNode(Node):
+    """A Node that reads its parameters once; ``node_name`` also names it in the reason
+    a runtime change is refused with."""
+
+    def __init__(self, node_name: str, **kwargs: Any) -> None:
+        self._read_only_reason = (f'{node_name} reads its parameters once at start-up; they '
+                                  'are read-only (restart the node with the new value)')
+        self._refusing = False
+        super().__init__(node_name, **kwargs)
+
+    def override_values(self) -> dict[str, Any]:
+        """name -> value of every parameter given to the node (params files, -p).
+
+        Read from rclpy's overrides instead of declared from them automatically: rclpy
+        cannot declare a typed parameter from an empty YAML list (it has no type), which
+        must become a message naming the parameter, not a traceback. An empty list is [].
+        """
+        return {name: ([] if param.type_ == Parameter.Type.NOT_SET else param.value)
+                for name, param in self._parameter_overrides.items()}
+
+    def declare_read_only(self, name: str, value: Any, description: str) -> None:
+        """Declare ``name`` read-only with ``value`` (an empty list: no type, dynamic)."""
+        if isinstance(value, (list, tuple)) and len(value) == 0:
+            self.declare_parameter(name, None, ParameterDescriptor(
+                read_only=True, dynamic_typing=True, description=description),
+                ignore_override=True)
+            return
+        self.declare_parameter(name, value, ParameterDescriptor(
+            read_only=True, description=description), ignore_override=True)
+
+    def declare_given(self, overrides: Mapping[str, Any], wanted: Callable[[str], bool],
+                      description: str) -> dict[str, Any]:
+        """Declare every given parameter whose name is ``wanted`` read-only; return them."""
+        values = {name: value for name, value in overrides.items() if wanted(name)}
+        for name, value in values.items():
+            self.declare_read_only(name, value, description)
+        return values
+
+    def warn_unknown(self, overrides: Mapping[str, Any], known: Callable[[str], bool]) -> None:
+        """Warn about every given parameter that is not ``known``, rclpy's or a QoS override."""
+        for name in sorted(overrides):
+            if not (known(name) or name.startswith('qos_overrides.')) \
+                    and name not in RCLPY_PARAMETERS:
+                self.get_logger().warning(f"ignoring unknown parameter '{name}'")
+
+    def declare_table(self, table: Mapping[str, NodeParameter], overrides: Mapping[str, Any],
+                      active_types: Sequence[str],
+                      defaults: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """Declare the parameters of ``table`` read-only, from the overrides or the defaults
+        (``defaults``: name -> value instead of the table's default, None: the table's; an
+        empty list given for it counts as not given); return them as checked."""
+        values = {}
+        defaults = defaults or {}
+        for name, param in table.items():
+            value = overrides.get(name, param.default)
+            if defaults.get(name) is not None and (value is None or value == []):
+                value = defaults[name]
+            value = param.check(value, active_types)
+            declared = value.tolist() if isinstance(value, np.ndarray) else value
+            self.declare_read_only(name, declared, param.ros_description)
+            values[name] = value
+        return values
+
+    def check_qos_overrides(self, overrides: Mapping[str, Any]) -> None:
+        """Every qos_overrides.* parameter names a policy the node honours, with a valid value.
+
+        rclpy would fail on them with a traceback while it creates the topics (a bogus
+        reliability, a negative or huge depth); here each becomes MechanismConfigError.
+        """
+        for name, value in overrides.items():
+            if not name.startswith('qos_overrides.'):
+                continue
+            policy = name.rsplit('.', 1)[-1]
+            if policy in QOS_OVERRIDE_VALUES:
+                if value not in QOS_OVERRIDE_VALUES[policy]:
+                    raise MechanismConfigError(
+                        name, f"must be one of {', '.join(QOS_OVERRIDE_VALUES[policy])}, "
+                              f'got {value!r}')
+            elif policy == 'depth':
+                if isinstance(value, bool) or not isinstance(value, int) \
+                        or not 1 <= value <= MAX_QOS_DEPTH:
+                    raise MechanismConfigError(
+                        name, f'must be an integer from 1 to {MAX_QOS_DEPTH}, got {value!r}')
+            else:
+                raise MechanismConfigError(
+                    name, 'the node honours only history, depth and reliability overrides '
+                          '(qos_overrides./<topic>.<publisher|subscription>.<policy>)')
+
+    @contextlib.contextmanager
+    def qos_overrides_honoured(self, overrides: Mapping[str, Any]) -> Iterator[None]:
+        """Around the creation of the node's topics: a QoS override rclpy cannot apply
+        becomes MechanismConfigError; one that matches no topic is warned about."""
+        try:
+            yield
+        except (rclpy.exceptions.ParameterException, RuntimeError, TypeError,
+                ValueError) as exc:
+            raise MechanismConfigError(
+                'qos_overrides', f"cannot be honoured: {' '.join(str(exc).split())}") from None
+        for name in sorted(overrides):
+            if name.startswith('qos_overrides.') and not self.has_parameter(name):
+                self.get_logger().warning(
+                    f"ignoring unknown parameter '{name}' (no topic of the node by that "
+                    'fully qualified name)')
+
+    def make_use_sim_time_read_only(self) -> bool:
+        """use_sim_time is read at start-up like every other parameter, then read-only;
+        returns it.
+
+        Switched on at runtime without a /clock publisher it would freeze the node's clock:
+        no more /diagnostics, no hold command. rclpy declares it writable; the node
+        declares it again read-only, and once built refuses every parameter change with a
+        reason (:meth:`refuse_changes`).
+        """
+        value = self.get_parameter('use_sim_time').value
+        self.undeclare_parameter('use_sim_time')
+        self.declare_parameter('use_sim_time', bool(value), ParameterDescriptor(
+            read_only=True, description='ROS time from /clock (read at start-up only)'),
+            ignore_override=True)
+        return bool(value)
+
+    def refuse_changes(self) -> None:
+        """From now on (the node is built) every parameter change is refused with the
+        node's reason. Last in the constructor: declaring a parameter (rclpy declares the
+        QoS overrides) runs the on-set callbacks."""
+        self.add_on_set_parameters_callback(self._refuse_parameter_changes)
+        self._refusing = True
+
+    @guarded
+    def _refuse_parameter_changes(self, parameters: Sequence[Parameter]) -> SetParametersResult:
+        names = ', '.join(p.name for p in parameters)
+        return SetParametersResult(successful=False,
+                                   reason=f'{names}: {self._read_only_reason}')
+
+    # rclpy checks a descriptor's read_only before any callback and refuses with its own
+    # words ("Trying to set a read-only parameter"); a change of a declared parameter at
+    # runtime gets the node's reason instead (the descriptors still say read-only)
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
+        if self._refuses(parameter_list):
+            return [self._refuse_parameter_changes([p]) for p in parameter_list]
+        return super().set_parameters(parameter_list)
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        if self._refuses(parameter_list):
+            return self._refuse_parameter_changes(parameter_list)
+        return super().set_parameters_atomically(parameter_list)
+
+    def _refuses(self, parameter_list: Sequence[Parameter]) -> bool:
+        """Once the node is built, a change of any parameter it declared is refused."""
+        return self._refusing and any(self.has_parameter(p.name) for p in parameter_list)
