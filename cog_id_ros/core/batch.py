@@ -26,13 +26,13 @@ from .errors import CogIdError
 from .inputs import check_values, out_of_range
 from .joint_motion import projected_pose, velocity_basis
 from .kernels import ClosureRecord, PoseRecord, unpack
+from .lanes import columns
 from .sample_solve import (
     NEWTON_ITERATIONS,
     NEWTON_MAX_INCREMENT,
     PROJECTION_ITERATIONS,
     PROJECTION_TOLERANCE,
 )
-from .straight_line import leaves
 
 
 class Evaluation:
@@ -184,7 +184,7 @@ class Batch:
         guess[:, m.primary_joints] = z
         positions, flat, converged, mismatch = self.close(guess, qa, qd, qdd)
         record = self.record(flat)
-        basis = _Bases(m, record.basis)
+        basis = _Bases(self.serial.layout, record.basis)
         ok = (converged & (record.condition <= m.max_condition_number) &
               (mismatch <= m.setpoint_tolerance) & ~invalid)
         ok &= self.continues(state, qa, positions, record.basis)      # 3. the serial rules
@@ -221,7 +221,7 @@ class Batch:
             if not todo.size:
                 break
             part = self.record(flat[todo])
-            basis = self.basis(part)
+            basis = self.serial.layout.array(part.basis)
             moved = projected_pose(m, columns(q[todo]),
                                    [columns(row) for row in basis.swapaxes(0, 1)],
                                    columns(part.projection))
@@ -276,20 +276,12 @@ class Batch:
         return 0.01 * math.sqrt(self.mechanism.closure_tolerance)
 
     def closed(self, record):
-        """(N,) bool: the loops of each sample are closed (as SampleSolver.close decides)."""
-        return (record.worst < self.mechanism.closure_tolerance) & (record.least_cosine > 0.0)
+        """(N,) bool: the loops of each sample are closed (closure.loops_closed)."""
+        return closure.loops_closed(record.worst, record.least_cosine,
+                                    self.mechanism.closure_tolerance)
 
     def record(self, flat):
         return unpack(flat, self.kernels.layouts['dynamics'], PoseRecord)
-
-    def basis(self, record):
-        """The velocity basis V of every sample, (N, n_joints, dof)."""
-        m = self.mechanism
-        basis = np.zeros((len(record.basis), m.n_coordinates, m.dof))
-        basis[:, m.free_joints] = record.basis
-        for k, j in enumerate(m.primary_joints):
-            basis[:, j, k] = 1.0
-        return basis
 
     def continues(self, start_state, qa, positions, free_rows):
         """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for
@@ -382,36 +374,13 @@ class _Bases:
     """The velocity bases V (n_joints, dof) of N samples, made per sample when asked for
     from the records' free rows (N, n_free, dof); re-solved samples' bases as set."""
 
-    def __init__(self, mechanism, free_rows):
-        self.mechanism, self.free_rows, self.solved = mechanism, free_rows, {}
+    def __init__(self, layout, free_rows):
+        self.layout, self.free_rows, self.solved = layout, free_rows, {}
 
     def __getitem__(self, i):
         if i in self.solved:
             return self.solved[i]
-        m = self.mechanism
-        basis = np.zeros((m.n_coordinates, m.dof))
-        basis[m.free_joints] = self.free_rows[i]
-        for k, j in enumerate(m.primary_joints):
-            basis[j, k] = 1.0
-        return basis
+        return self.layout.array(self.free_rows[i])
 
     def __setitem__(self, i, basis):
         self.solved[i] = np.asarray(basis, dtype=float)
-
-
-def columns(array):
-    """(N, k) array -> list of k lanes of shape (N,)."""
-    return [array[:, a] for a in range(array.shape[1])]
-
-
-def stacked(nested):
-    """Nested lists of lanes (floats, or (N,) arrays) -> an array (...) or (N, ...)."""
-    n = next((x.shape[0] for x in leaves(nested) if isinstance(x, np.ndarray) and x.ndim),
-             None)
-    return np.array(nested, dtype=float) if n is None else _stacked(nested, n)
-
-
-def _stacked(nested, n):
-    if isinstance(nested, (list, tuple)):
-        return np.stack([_stacked(x, n) for x in nested], axis=1)
-    return np.broadcast_to(np.asarray(nested, dtype=float), (n,))

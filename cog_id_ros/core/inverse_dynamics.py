@@ -13,12 +13,13 @@ import numpy as np
 
 from . import closure
 from . import spatial as sp
-from .batch import Batch, Evaluation, columns, pose_of, stacked
+from .batch import Batch, Evaluation, pose_of
 from .cog_jacobian import cog_poses
 from .errors import CogIdError, MechanismConfigError, SetpointError, SingularConfigurationError
 from .inputs import check_values, float_array, one_sample, out_of_range, setpoint_arrays
 from .joint_motion import active_velocity_map, combine, velocity_basis
 from .kernels import kernels_for
+from .lanes import columns, stacked
 from .mechanism import Mechanism
 from .pipeline import cog_jacobians_at, cog_motion, equation_of_motion
 from .sample_solve import SampleSolver

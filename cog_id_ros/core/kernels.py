@@ -38,8 +38,9 @@ from .continuation import prediction
 from .emitter import c_module_source, python_function
 from .errors import MechanismConfigError
 from .joint_motion import projection_increment, velocity_basis
+from .lanes import columns, flat
 from .pipeline import inverse_dynamics
-from .straight_line import Graph, SymOps, leaves
+from .straight_line import Graph, SymOps
 
 BACKENDS = ('auto', 'reference', 'python', 'native')
 
@@ -158,22 +159,11 @@ class ReferenceKernels:
         return pose_record(self.mechanism, q, target, qd, qdd, sp.ScalarOps)
 
     def closure_many(self, q):
-        return _flat(closure_record(self.mechanism, _lanes(q), sp.ArrayOps)[1], len(q))
+        return flat(closure_record(self.mechanism, columns(q), sp.ArrayOps)[1], len(q))
 
     def dynamics_many(self, q, target, qd, qdd):
-        return _flat(pose_record(self.mechanism, *map(_lanes, (q, target, qd, qdd)),
-                                 sp.ArrayOps), len(q))
-
-
-def _lanes(array):
-    return [array[:, k] for k in range(array.shape[1])]
-
-
-def _flat(record, n):
-    values = leaves(list(record))
-    if not values:
-        return np.zeros((n, 0))
-    return np.column_stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in values])
+        return flat(pose_record(self.mechanism, *map(columns, (q, target, qd, qdd)),
+                                sp.ArrayOps), len(q))
 
 
 def trace(mechanism):

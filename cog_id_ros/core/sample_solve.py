@@ -17,6 +17,7 @@ here.
 """
 import math
 
+from .closure import loops_closed
 from .continuation import (
     MAX_STEPS,
     MIN_STEP,
@@ -31,7 +32,7 @@ from .continuation import (
     wrapped_state,
 )
 from .errors import ClosureError, SingularConfigurationError
-from .joint_motion import projected_pose
+from .joint_motion import BasisLayout, projected_pose
 
 #: Newton iterations of one continuation step (from a first-order prediction within the
 #: step limits Newton converges in a few; more means the step is too long: it is halved)
@@ -74,9 +75,7 @@ class SampleSolver:
         self.tolerance = m.closure_tolerance
         self.redundant = m.is_redundant
         self.zeros = [0.0] * len(m.active_joints)
-        # the velocity basis rows of the primary actuators are constant unit rows
-        self.unit_rows = [(j, [1.0 if i == k else 0.0 for i in range(m.dof)])
-                          for k, j in enumerate(m.primary_joints)]
+        self.layout = BasisLayout(m)
 
     def solve(self, state, target, qd=None, qdd=None, sample=None):
         """(PoseRecord at ``target``, new state) by continuation from ``state``."""
@@ -162,7 +161,7 @@ class SampleSolver:
         whole = likely_closed
         record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
-            if record.worst < tol and record.least_cosine > 0.0:
+            if loops_closed(record.worst, record.least_cosine, tol):
                 if not whole:
                     record = kernels.dynamics(q, goal, qd, qdd)
                 return q, record, iteration, True
@@ -206,12 +205,7 @@ class SampleSolver:
 
     def basis(self, record):
         """The velocity basis V (list over joints) from a record's rows of the free joints."""
-        rows = [None] * self.mechanism.n_coordinates
-        for j, row in self.unit_rows:
-            rows[j] = row
-        for j, row in zip(self.free, record.basis):
-            rows[j] = row
-        return rows
+        return self.layout.rows(record.basis)
 
 
 def _where(sample):
