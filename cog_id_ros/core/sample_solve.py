@@ -32,6 +32,7 @@ from .continuation import (
     wrapped_state,
 )
 from .errors import ClosureError, SingularConfigurationError
+from .inputs import out_of_range
 from .joint_motion import BasisLayout, projected_pose
 
 #: Newton iterations of one continuation step (from a first-order prediction within the
@@ -134,6 +135,14 @@ class SampleSolver:
             one_step = fits_one_step(m, limits, state, target, moved)
         raise unreachable(m, start, target, sample,
                           f'not reached in {MAX_STEPS} continuation steps')
+
+    def solve_torques(self, state, target, qd, qdd, sample=None):
+        """:meth:`solve`, and SetpointError (reason 'out_of_range') where the torques there
+        are not finite; the warm start is the caller's."""
+        record, state = self.solve(state, target, qd, qdd, sample)
+        if not all(map(math.isfinite, record.torques)):
+            raise out_of_range(qd, qdd, sample)
+        return record, state
 
     def step(self, predicted, goal, final, qd, qdd, sample):
         """One continuation step: close the loops from ``predicted``, check, and on the final
