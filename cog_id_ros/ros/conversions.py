@@ -256,7 +256,7 @@ def solve_trajectory_message(raw, solver, selector, *, unwrap=None, max_step=Non
     """A serialized JointTrajectory -> (serialized effort_trajectory, clipped, points).
 
     The whole trajectory path of the node, run in its trajectory process (see
-    ``cog_id_ros.node.TrajectoryWorker``): deserialise, check, solve in one vectorised
+    ``cog_id_ros.ros.node.TrajectoryWorker``): deserialise, check, solve in one vectorised
     core call, clip to ``effort_limits``, build and serialise the answer. Raises Rejected
     (with the number of points in ``points``) for a trajectory that gets no answer.
     """

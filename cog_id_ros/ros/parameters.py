@@ -18,6 +18,7 @@ import sys
 from typing import Any, Callable, Sequence
 
 from ..core import MechanismConfigError
+from ..core.kernels import BACKENDS
 
 #: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters):
 #: the native form (links.*, joints.*) and the URDF form (loop_closures.*; docs/urdf.md)
@@ -32,9 +33,6 @@ def is_mechanism_parameter(name: str) -> bool:
 
 
 TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
-
-#: InverseDynamics(backend=...) choices
-BACKENDS = ('auto', 'native', 'python', 'reference')
 
 #: max_setpoint_step per joint type when the parameter is not given (rad, m)
 DEFAULT_MAX_STEP = {'revolute': 1.0, 'prismatic': 0.1}
