@@ -13,34 +13,7 @@ import numpy as np
 from .continuation import MAX_ANGLE
 from .errors import SetpointError
 
-
-def setpoint_arrays(mechanism, q, qd, qdd):
-    """(q, qd, qdd) as float arrays of shape (N, M), and whether it was one sample.
-
-    ``q`` is required; ``qd`` and ``qdd`` default to zeros. One sample is (M,), or a
-    plain number when M = 1. Raises SetpointError (reason 'malformed') for anything else.
-    """
-    names = mechanism.active_joints
-    m = len(names)
-    if q is None:
-        raise SetpointError(f'q: required, one position per active joint {names}')
-    arrays = [_float_array(label, value, m) if value is not None else None
-              for label, value in (('q', q), ('qd', qd), ('qdd', qdd))]
-    single = arrays[0].ndim == 1
-    out = []
-    for label, array in zip(('q', 'qd', 'qdd'), arrays):
-        if array is None:
-            out.append(np.zeros((1 if single else arrays[0].shape[0], m)))
-            continue
-        if array.ndim != (1 if single else 2) or array.shape[-1] != m or \
-                (not single and array.shape[0] != arrays[0].shape[0]):
-            expected = f'({m},)' if single else f'({arrays[0].shape[0]}, {m})'
-            raise SetpointError(
-                f'{label}: expected shape {expected} (active joints {names}), got {array.shape}')
-        out.append(array.reshape(1, -1) if single else array)
-    return out[0], out[1], out[2], single
-
-
+#: the types of a control loop's setpoints (the fast path of setpoints)
 _FLOAT = {float}
 
 
@@ -104,6 +77,33 @@ def rates(mechanism, qd):
     checks rates."""
     zeros = [0.0] * len(mechanism.active_joints)
     return setpoints(mechanism, (), zeros, qd, zeros, limits=False)[1]
+
+
+def setpoint_arrays(mechanism, q, qd, qdd):
+    """(q, qd, qdd) as float arrays of shape (N, M), and whether it was one sample.
+
+    ``q`` is required; ``qd`` and ``qdd`` default to zeros. One sample is (M,), or a
+    plain number when M = 1. Raises SetpointError (reason 'malformed') for anything else.
+    """
+    names = mechanism.active_joints
+    m = len(names)
+    if q is None:
+        raise SetpointError(f'q: required, one position per active joint {names}')
+    arrays = [_float_array(label, value, m) if value is not None else None
+              for label, value in (('q', q), ('qd', qd), ('qdd', qdd))]
+    single = arrays[0].ndim == 1
+    out = []
+    for label, array in zip(('q', 'qd', 'qdd'), arrays):
+        if array is None:
+            out.append(np.zeros((1 if single else arrays[0].shape[0], m)))
+            continue
+        if array.ndim != (1 if single else 2) or array.shape[-1] != m or \
+                (not single and array.shape[0] != arrays[0].shape[0]):
+            expected = f'({m},)' if single else f'({arrays[0].shape[0]}, {m})'
+            raise SetpointError(
+                f'{label}: expected shape {expected} (active joints {names}), got {array.shape}')
+        out.append(array.reshape(1, -1) if single else array)
+    return out[0], out[1], out[2], single
 
 
 def within_limits(mechanism, q):
