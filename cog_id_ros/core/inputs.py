@@ -50,12 +50,12 @@ def setpoints(mechanism, wrapping, q, qd, qdd, limits=True):
                 break
         else:
             break
-        if len(sample[-1]) != m or not all(map(math.isfinite, sample[-1])):
-            break
     else:
-        if all(-MAX_ANGLE <= sample[0][a] <= MAX_ANGLE for a in wrapping) and \
-                (not limits or within_limits(mechanism, sample[0])):
-            return sample[0], sample[1], sample[2], True
+        q_, qd_, qdd_ = sample
+        if len(q_) == len(qd_) == len(qdd_) == m and all(map(math.isfinite, q_ + qd_ + qdd_)) \
+                and all(-MAX_ANGLE <= q_[a] <= MAX_ANGLE for a in wrapping) \
+                and (not limits or within_limits(mechanism, q_)):
+            return q_, qd_, qdd_, True
     q, qd, qdd, single = setpoint_arrays(mechanism, q, qd, qdd)
     if not single:
         return q, qd, qdd, False

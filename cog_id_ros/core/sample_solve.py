@@ -157,7 +157,7 @@ class SampleSolver:
             q, record = self.project(q, record, goal, qd, qdd, sample)
         if not record.condition <= m.max_condition_number:
             raise singular(m, record.condition, sample)
-        return record, (q, self.basis(record)), closed
+        return record, (q, self.layout.rows(record.basis)), closed
 
     def close(self, q, goal, qd, qdd, likely_closed=False):
         """Newton's method on the loop equations from ``q``, moving the free joints.
