@@ -20,19 +20,18 @@ import math
 import numpy as np
 
 from . import closure
-from . import spatial as sp
 from .continuation import correction_ok, fits_one_step, prediction
 from .errors import CogIdError
-from .inputs import check_values, out_of_range
-from .joint_motion import projected_pose, velocity_basis
+from .inputs import check_values, checked_sample, out_of_range
+from .joint_motion import projected_pose
 from .kernels import ClosureRecord, PoseRecord, unpack
+from .lanes import columns
 from .sample_solve import (
     NEWTON_ITERATIONS,
     NEWTON_MAX_INCREMENT,
     PROJECTION_ITERATIONS,
     PROJECTION_TOLERANCE,
 )
-from .straight_line import leaves
 
 
 class Evaluation:
@@ -69,14 +68,6 @@ class Evaluation:
         self._positions = value
 
 
-def pose_of(mechanism, positions):
-    """(closure solution, velocity basis) of N poses (N, n_joints) on (N,) lanes, for the
-    lane code of eqs. (1)-(4); nothing solved."""
-    pose = closure.evaluate(mechanism.model, columns(positions), mechanism.free_joints,
-                            sp.ArrayOps)
-    return pose, velocity_basis(mechanism, pose)
-
-
 class Batch:
     """The batch driver of one mechanism, around its per-sample solver."""
 
@@ -85,6 +76,25 @@ class Batch:
         self.joints_at = joints_at      # the joints as written from the coordinates
         self.serial = sample_solver
         self.kernels = sample_solver.kernels
+
+    def evaluate_one(self, state, q, qd, qdd, on_invalid):
+        """(Evaluation of one sample (arrays (1, M)), new state), by the per-sample path."""
+        try:
+            sample = checked_sample(self.mechanism, self.serial.wrapping, q, qd, qdd)
+            record, new_state = self.serial.solve_torques(state, *sample)
+        except CogIdError as exc:
+            if on_invalid == 'raise':
+                raise
+            return self._one(state, np.zeros(q.shape), exc, getattr(exc, 'residual', math.inf),
+                             getattr(exc, 'condition_number', math.inf)), state
+        return self._one(new_state, np.array([record.torques]), None, record.worst,
+                         record.condition), new_state
+
+    def _one(self, state, torques, error, residual, condition):
+        at = np.array([state[0]])
+        return Evaluation(torques, np.array([error is None]), [error],
+                          lambda: self.joints_at(at)[0], at[:, self.mechanism.active_index],
+                          np.array([residual]), np.array([condition]))
 
     def evaluate(self, state, q, qd, qdd, on_invalid):
         """(Evaluation of N > 1 samples, new state)."""
@@ -132,6 +142,25 @@ class Batch:
             flat = self.kernels.dynamics_many(empty, qa, qd, qdd)
             return self.record(flat), empty, np.zeros(0, bool), [], state
         invalid = np.zeros(n, bool) if invalid is None else invalid
+        knots = self.anchors(state, qa, invalid)                       # 1. serial anchors
+        guess = self.interpolated_starts(state, qa, *knots)             # 2. starts, closed
+        positions, flat, converged, mismatch = self.close(guess, qa, qd, qdd)
+        record = self.record(flat)
+        basis = _Bases(self.serial.layout, record.basis)
+        ok = (converged & (record.condition <= m.max_condition_number) &
+              (mismatch <= m.setpoint_tolerance) & ~invalid)
+        ok &= self.continues(state, qa, positions, record.basis)      # 3. the serial rules
+        errors = [None] * n
+        redone = self.resolve_serially(state, qa, positions, basis, ok, invalid, errors,
+                                       on_invalid)
+        new_state = self.finish(state, (qa, qd, qdd), flat, positions, basis, ok, redone)
+        return record, positions, ok, errors, new_state
+
+    def anchors(self, state, qa, invalid):
+        """Step 1: serial anchors every continuation step of actuator travel, each solved
+        from the last (an anchor that fails is left out). Returns the knots of step 2:
+        their sample indices (-1: the warm start, the first knot), poses and bases."""
+        m = self.mechanism
         limits = np.array(self.serial.limits)
         start = np.array([state[0][j] for j in m.active_index])
         travel = np.max(np.abs(np.diff(np.vstack([start, qa]), axis=0)) /
@@ -140,23 +169,27 @@ class Batch:
         is_anchor = np.diff(np.concatenate([[0.0], np.floor(arc)])) > 0
         is_anchor[-1] = True
         is_anchor &= ~invalid
-        anchor_q, anchor_v, failed, walk = {}, {}, set(), state
-        for a in np.flatnonzero(is_anchor):      # 1. serial anchors, each from the last
+        knots_at, knots_q, knots_v, walk = [-1], [state[0]], [state[1]], state
+        for a in np.flatnonzero(is_anchor):
             try:
                 walk = self.serial.solve(walk, qa[a].tolist(), sample=int(a))[1]
-                anchor_q[a], anchor_v[a] = walk
             except CogIdError:
-                failed.add(a)
-        # 2. a start for every sample between its neighbouring anchors: the cubic Hermite
-        # interpolation in the sample index of the anchors' poses and rates dq/di = V dz/di
-        # (dz/di by central differences of the setpoints), fourth order in the anchors'
-        # spacing for any number of actuators. (A blend of first-order predictions, exact
-        # to third order along one actuator, left the Stewart platform's starts 5e-4 off:
-        # three or four Newton passes; now 1e-5, two or three.)
-        known = [a for a in np.flatnonzero(is_anchor) if a not in failed]
-        knots_at = np.array([-1] + known)
-        knots_q = np.array([state[0]] + [anchor_q[a] for a in known])
-        knots_v = np.array([state[1]] + [anchor_v[a] for a in known])
+                continue
+            knots_at.append(a)
+            knots_q.append(walk[0])
+            knots_v.append(walk[1])
+        return np.array(knots_at), np.array(knots_q), np.array(knots_v)
+
+    def interpolated_starts(self, state, qa, knots_at, knots_q, knots_v):
+        """Step 2: a start for every sample between its neighbouring anchors (the knots):
+        the cubic Hermite interpolation in the sample index of the anchors' poses and rates
+        dq/di = V dz/di (dz/di by central differences of the setpoints), fourth order in the
+        anchors' spacing for any number of actuators. (A blend of first-order predictions,
+        exact to third order along one actuator, left the Stewart platform's starts 5e-4
+        off: three or four Newton passes; now 1e-5, two or three.) Returns (N, n_joints)."""
+        m = self.mechanism
+        n = len(qa)
+        start = np.array([state[0][j] for j in m.active_index])
         index = np.arange(n)
         nxt = np.minimum(np.searchsorted(knots_at, index), len(knots_at) - 1)
         prv = np.maximum(nxt - 1, 0)
@@ -182,28 +215,25 @@ class Batch:
         near = np.where(s[:, 0] < 0.5, prv, nxt)
         guess += _by_knot(knots_v, near, _wrapped(z - guess[:, m.primary_joints], turns))
         guess[:, m.primary_joints] = z
-        positions, flat, converged, mismatch = self.close(guess, qa, qd, qdd)
-        record = self.record(flat)
-        basis = _Bases(m, record.basis)
-        ok = (converged & (record.condition <= m.max_condition_number) &
-              (mismatch <= m.setpoint_tolerance) & ~invalid)
-        ok &= self.continues(state, qa, positions, record.basis)      # 3. the serial rules
-        errors = [None] * n
-        redone = self.resolve_serially(state, qa, positions, basis, ok, invalid, errors,
-                                       on_invalid)
+        return guess
+
+    def finish(self, state, setpoints, flat, positions, basis, ok, redone):
+        """Step 4: the new warm start (the last good sample's pose and basis), the poses of
+        the samples not ok set to it (keeps NaN out of their lanes), and the flat dynamics
+        outputs evaluated again where the poses changed. Returns the new state."""
         good = np.flatnonzero(ok)
         if good.size:
             last = good[-1]
-            positions[~ok] = positions[last]       # keep NaN out of the masked lanes
+            positions[~ok] = positions[last]
             new_state = (positions[last].tolist(), basis[last].tolist())
         else:
             positions[:] = state[0]
             new_state = state
         changed = np.flatnonzero(redone | ~ok)
-        if changed.size:                           # 4. the record where the poses changed
-            flat[changed] = self.kernels.dynamics_many(positions[changed], qa[changed],
-                                                       qd[changed], qdd[changed])
-        return record, positions, ok, errors, new_state
+        if changed.size:
+            flat[changed] = self.kernels.dynamics_many(positions[changed],
+                                                       *(x[changed] for x in setpoints))
+        return new_state
 
     def close(self, guess, qa, qd, qdd):
         """Newton on every sample at once from ``guess`` (N, n_joints), then for redundant
@@ -221,7 +251,7 @@ class Batch:
             if not todo.size:
                 break
             part = self.record(flat[todo])
-            basis = self.basis(part)
+            basis = self.serial.layout.array(part.basis)
             moved = projected_pose(m, columns(q[todo]),
                                    [columns(row) for row in basis.swapaxes(0, 1)],
                                    columns(part.projection))
@@ -276,20 +306,12 @@ class Batch:
         return 0.01 * math.sqrt(self.mechanism.closure_tolerance)
 
     def closed(self, record):
-        """(N,) bool: the loops of each sample are closed (as SampleSolver.close decides)."""
-        return (record.worst < self.mechanism.closure_tolerance) & (record.least_cosine > 0.0)
+        """(N,) bool: the loops of each sample are closed (closure.loops_closed)."""
+        return closure.loops_closed(record.worst, record.least_cosine,
+                                    self.mechanism.closure_tolerance)
 
     def record(self, flat):
         return unpack(flat, self.kernels.layouts['dynamics'], PoseRecord)
-
-    def basis(self, record):
-        """The velocity basis V of every sample, (N, n_joints, dof)."""
-        m = self.mechanism
-        basis = np.zeros((len(record.basis), m.n_coordinates, m.dof))
-        basis[:, m.free_joints] = record.basis
-        for k, j in enumerate(m.primary_joints):
-            basis[:, j, k] = 1.0
-        return basis
 
     def continues(self, start_state, qa, positions, free_rows):
         """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for
@@ -382,36 +404,13 @@ class _Bases:
     """The velocity bases V (n_joints, dof) of N samples, made per sample when asked for
     from the records' free rows (N, n_free, dof); re-solved samples' bases as set."""
 
-    def __init__(self, mechanism, free_rows):
-        self.mechanism, self.free_rows, self.solved = mechanism, free_rows, {}
+    def __init__(self, layout, free_rows):
+        self.layout, self.free_rows, self.solved = layout, free_rows, {}
 
     def __getitem__(self, i):
         if i in self.solved:
             return self.solved[i]
-        m = self.mechanism
-        basis = np.zeros((m.n_coordinates, m.dof))
-        basis[m.free_joints] = self.free_rows[i]
-        for k, j in enumerate(m.primary_joints):
-            basis[j, k] = 1.0
-        return basis
+        return self.layout.array(self.free_rows[i])
 
     def __setitem__(self, i, basis):
         self.solved[i] = np.asarray(basis, dtype=float)
-
-
-def columns(array):
-    """(N, k) array -> list of k lanes of shape (N,)."""
-    return [array[:, a] for a in range(array.shape[1])]
-
-
-def stacked(nested):
-    """Nested lists of lanes (floats, or (N,) arrays) -> an array (...) or (N, ...)."""
-    n = next((x.shape[0] for x in leaves(nested) if isinstance(x, np.ndarray) and x.ndim),
-             None)
-    return np.array(nested, dtype=float) if n is None else _stacked(nested, n)
-
-
-def _stacked(nested, n):
-    if isinstance(nested, (list, tuple)):
-        return np.stack([_stacked(x, n) for x in nested], axis=1)
-    return np.broadcast_to(np.asarray(nested, dtype=float), (n,))

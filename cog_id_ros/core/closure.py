@@ -80,11 +80,11 @@ def evaluate(model, q, free, ops):
     return sol
 
 
-def _closed(sol, tol):
-    ok = sol.residual < tol
-    for st in sol.loops:
-        ok = ok & (st.cosine > 0.0)
-    return ok
+def loops_closed(residual, least_cosine, tolerance):
+    """The loops are closed: the largest closure residual below ``tolerance`` and every
+    cosine positive (``least_cosine`` the least of them: a loop closed a half-turn off has
+    a zero residual too). Floats, or (N,) arrays for an (N,) bool array; False for NaN."""
+    return (residual < tolerance) & (least_cosine > 0.0)
 
 
 def closure_jacobian_matrix(model, q):
@@ -110,7 +110,7 @@ def assemble(model, q, tol, fixed=(), max_iter=100, max_step=0.2):
     for _ in range(max_iter):
         matrix, sol = closure_jacobian_matrix(model, q)
         residual = sol.residual
-        if _closed(sol, tol):
+        if loops_closed(residual, sp.ScalarOps.least([st.cosine for st in sol.loops]), tol):
             return q, residual, True
         phi = np.array([r for st in sol.loops for r in st.residual])
         step = np.zeros(model.n_coordinates)

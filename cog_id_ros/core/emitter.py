@@ -20,6 +20,7 @@ numbers)::
 Every expression is what spatial.ScalarOps computes for that operation, so the emitted
 function returns exactly what the lane code returns on floats.
 """
+from importlib import resources
 import math
 
 from .straight_line import Sym, leaves, live_operations
@@ -166,155 +167,16 @@ C_EXPRESSIONS = {
     'min': '({0} < {1} || {0} != {0} ? {0} : {1})',
 }
 
-_C_PRELUDE = r"""/* Kernels of one mechanism, emitted by cog_id_ros.core.emitter: do not edit. */
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
-#include <math.h>
-#include <string.h>
+#: the C every kernel module starts with (package data beside this module): reading Python
+#: sequences, writing records and checking the buffers of the *_many kernels, and
+#: set_record_types; ``N_KERNELS`` in it stands for the number of kernels
+C_PRELUDE = 'kernels_prelude.c'
 
-static PyObject *record_type[%(n_kernels)d];
 
-/* n doubles from a sequence of numbers; -1 and a Python error when it is not one */
-static int read_doubles(PyObject *seq, double *dst, Py_ssize_t n, const char *name)
-{
-    PyObject *fast = PySequence_Fast(seq, name);
-    if (fast == NULL)
-        return -1;
-    if (PySequence_Fast_GET_SIZE(fast) != n) {
-        PyErr_Format(PyExc_ValueError, "%%s: expected %%zd values, got %%zd", name, n,
-                     PySequence_Fast_GET_SIZE(fast));
-        Py_DECREF(fast);
-        return -1;
-    }
-    PyObject **items = PySequence_Fast_ITEMS(fast);
-    for (Py_ssize_t i = 0; i < n; i++) {
-        dst[i] = PyFloat_AsDouble(items[i]);
-        if (dst[i] == -1.0 && PyErr_Occurred()) {
-            Py_DECREF(fast);
-            return -1;
-        }
-    }
-    Py_DECREF(fast);
-    return 0;
-}
-
-/* n_rows sequences of `width` numbers, row after row */
-static int read_rows(PyObject *seq, double *dst, Py_ssize_t n_rows, Py_ssize_t width,
-                     const char *name)
-{
-    PyObject *fast = PySequence_Fast(seq, name);
-    if (fast == NULL)
-        return -1;
-    if (PySequence_Fast_GET_SIZE(fast) != n_rows) {
-        PyErr_Format(PyExc_ValueError, "%%s: expected %%zd rows, got %%zd", name, n_rows,
-                     PySequence_Fast_GET_SIZE(fast));
-        Py_DECREF(fast);
-        return -1;
-    }
-    PyObject **items = PySequence_Fast_ITEMS(fast);
-    for (Py_ssize_t i = 0; i < n_rows; i++)
-        if (read_doubles(items[i], dst + i * width, width, name) < 0) {
-            Py_DECREF(fast);
-            return -1;
-        }
-    Py_DECREF(fast);
-    return 0;
-}
-
-/* a tuple of n floats */
-static PyObject *floats(const double *v, Py_ssize_t n)
-{
-    PyObject *t = PyTuple_New(n);
-    if (t == NULL)
-        return NULL;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        PyObject *x = PyFloat_FromDouble(v[i]);
-        if (x == NULL) {
-            Py_DECREF(t);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(t, i, x);
-    }
-    return t;
-}
-
-/* a tuple of n_rows tuples of `width` floats */
-static PyObject *rows(const double *v, Py_ssize_t n_rows, Py_ssize_t width)
-{
-    PyObject *t = PyTuple_New(n_rows);
-    if (t == NULL)
-        return NULL;
-    for (Py_ssize_t i = 0; i < n_rows; i++) {
-        PyObject *row = floats(v + i * width, width);
-        if (row == NULL) {
-            Py_DECREF(t);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(t, i, row);
-    }
-    return t;
-}
-
-/* the record type's instance (a tuple subclass) of `fields`, which it takes over */
-static PyObject *record(int kind, PyObject *fields)
-{
-    if (fields == NULL)
-        return NULL;
-    PyObject *args = PyTuple_Pack(1, fields);
-    Py_DECREF(fields);
-    if (args == NULL)
-        return NULL;
-    PyObject *out = PyTuple_Type.tp_new((PyTypeObject *)record_type[kind], args, NULL);
-    Py_DECREF(args);
-    return out;
-}
-
-/* the n_views buffers of a *_many call, checked: C-contiguous float64 of N rows of
-   width[k]; the last one writable. Returns N, or -1 with a Python error. */
-static Py_ssize_t many_buffers(PyObject *const *args, Py_ssize_t nargs, int n_views,
-                               const Py_ssize_t *width, Py_buffer *view, const char *name)
-{
-    if (nargs != n_views) {
-        PyErr_Format(PyExc_TypeError, "%%s() takes %%d arrays", name, n_views);
-        return -1;
-    }
-    Py_ssize_t n = -1;
-    for (int k = 0; k < n_views; k++) {
-        int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (k == n_views - 1 ? PyBUF_WRITABLE : 0);
-        if (PyObject_GetBuffer(args[k], &view[k], flags) < 0) {
-            for (int j = 0; j < k; j++)
-                PyBuffer_Release(&view[j]);
-            return -1;
-        }
-        Py_ssize_t rows = width[k] ? view[k].len / (Py_ssize_t)sizeof(double) / width[k] : 0;
-        if (view[k].itemsize != sizeof(double) || view[k].format == NULL ||
-                strcmp(view[k].format, "d") != 0 ||
-                (width[k] && rows * width[k] * (Py_ssize_t)sizeof(double) != view[k].len) ||
-                (width[k] && n >= 0 && rows != n)) {
-            PyErr_Format(PyExc_ValueError, "%%s: argument %%d must be a C-contiguous float64 "
-                         "array of shape (N, %%zd)", name, k + 1, width[k]);
-            for (int j = 0; j <= k; j++)
-                PyBuffer_Release(&view[j]);
-            return -1;
-        }
-        if (width[k])
-            n = rows;
-    }
-    return n < 0 ? 0 : n;
-}
-
-static PyObject *set_record_types(PyObject *self, PyObject *args)
-{
-    for (int i = 0; i < %(n_kernels)d; i++) {
-        PyObject *t = PyTuple_GetItem(args, i);
-        if (t == NULL)
-            return NULL;
-        Py_INCREF(t);
-        Py_XSETREF(record_type[i], t);
-    }
-    Py_RETURN_NONE;
-}
-"""
+def c_prelude(n_kernels):
+    """The C prelude of a module of ``n_kernels`` kernels."""
+    text = resources.files(__package__).joinpath(C_PRELUDE).read_text(encoding='ascii')
+    return text.replace('N_KERNELS', str(n_kernels))
 
 
 def _c_literal(x):
@@ -353,9 +215,7 @@ def c_kernel_source(index, name, params, fields):
         return names[a] if isinstance(a, int) else _c_literal(a)
 
     sizes = [len(leaves(syms)) for _, syms in params]
-    n_out = len(outputs)
     declared = ', '.join(f'const double *restrict {p}' for p, _ in params)
-    arguments = ', '.join(p for p, _ in params)
     # the arithmetic, once
     lines = [f'static void body_{name}({declared}, double *restrict out)', '{']
     for k in operations:
@@ -364,14 +224,20 @@ def c_kernel_source(index, name, params, fields):
     for i, o in enumerate(outputs):
         lines.append(f'    out[{i}] = {operand(o.k if isinstance(o, Sym) else o)};')
     lines += ['}', '']
-    # one sample: Python sequences in, a record out
-    lines += [f'static PyObject *kernel_{name}(PyObject *self, PyObject *const *args, '
-              f'Py_ssize_t nargs)', '{',
-              f'    if (nargs != {len(params)}) {{',
-              f'        PyErr_SetString(PyExc_TypeError, "{name}() takes {len(params)} '
-              f'arguments");',
-              '        return NULL;',
-              '    }']
+    lines += _c_one_sample(index, name, params, fields, sizes, len(outputs))
+    lines += _c_many(name, params, sizes, len(outputs))
+    return '\n'.join(lines) + '\n', len(operations), len(outputs)
+
+
+def _c_one_sample(index, name, params, fields, sizes, n_out):
+    """Lines of ``kernel_name``: one sample, Python sequences in, a record out."""
+    lines = [f'static PyObject *kernel_{name}(PyObject *self, PyObject *const *args, '
+             f'Py_ssize_t nargs)', '{',
+             f'    if (nargs != {len(params)}) {{',
+             f'        PyErr_SetString(PyExc_TypeError, "{name}() takes {len(params)} '
+             f'arguments");',
+             '        return NULL;',
+             '    }']
     for i, (p, syms) in enumerate(params):
         shape = _field_shape(syms)
         reader = (f'read_rows(args[{i}], {p}, {shape[1]}, {shape[2]}, "{p}")'
@@ -380,7 +246,7 @@ def c_kernel_source(index, name, params, fields):
                   f'    if ({reader} < 0)',
                   '        return NULL;']
     lines += [f'    double out[{max(n_out, 1)}];',
-              f'    body_{name}({arguments}, out);']
+              f'    body_{name}({", ".join(p for p, _ in params)}, out);']
     built, offset = [], 0
     for field, value in fields:
         shape = _field_shape(value)
@@ -394,40 +260,43 @@ def c_kernel_source(index, name, params, fields):
             built.append(f'rows(out + {offset}, {shape[1]}, {shape[2]})')
             offset += shape[1] * shape[2]
     n = len(built)
-    lines += [f'    PyObject *f[{n}] = {{{", ".join(built)}}};',
-              f'    PyObject *fields = PyTuple_New({n});',
-              f'    for (int i = 0; i < {n}; i++)',
-              '        if (f[i] == NULL || fields == NULL) {',
-              f'            for (int j = 0; j < {n}; j++)',
-              '                Py_XDECREF(f[j]);',
-              '            Py_XDECREF(fields);',
-              '            return NULL;',
-              '        }',
-              f'    for (int i = 0; i < {n}; i++)',
-              '        PyTuple_SET_ITEM(fields, i, f[i]);',
-              f'    return record({index}, fields);',
-              '}', '']
-    # N samples: C-contiguous float64 buffers (N, width) in, one (N, outputs) written
+    return lines + [f'    PyObject *f[{n}] = {{{", ".join(built)}}};',
+                    f'    PyObject *fields = PyTuple_New({n});',
+                    f'    for (int i = 0; i < {n}; i++)',
+                    '        if (f[i] == NULL || fields == NULL) {',
+                    f'            for (int j = 0; j < {n}; j++)',
+                    '                Py_XDECREF(f[j]);',
+                    '            Py_XDECREF(fields);',
+                    '            return NULL;',
+                    '        }',
+                    f'    for (int i = 0; i < {n}; i++)',
+                    '        PyTuple_SET_ITEM(fields, i, f[i]);',
+                    f'    return record({index}, fields);',
+                    '}', '']
+
+
+def _c_many(name, params, sizes, n_out):
+    """Lines of ``kernel_name_many``: N samples, C-contiguous float64 buffers (N, width)
+    in, one (N, outputs) written."""
     widths = ', '.join(str(w) for w in sizes + [n_out])
-    lines += [f'static PyObject *kernel_{name}_many(PyObject *self, PyObject *const *args, '
-              f'Py_ssize_t nargs)', '{',
-              f'    static const Py_ssize_t width[{len(params) + 1}] = {{{widths}}};',
-              f'    Py_buffer view[{len(params) + 1}];',
-              f'    Py_ssize_t n = many_buffers(args, nargs, {len(params) + 1}, width, view, '
-              f'"{name}_many");',
-              '    if (n < 0)',
-              '        return NULL;']
     pointers = ', '.join(f'(const double *)view[{i}].buf + i * {w}'
                          for i, w in enumerate(sizes))
-    lines += ['    Py_BEGIN_ALLOW_THREADS',
-              '    for (Py_ssize_t i = 0; i < n; i++)',
-              f'        body_{name}({pointers}, (double *)view[{len(params)}].buf + i * {n_out});',
-              '    Py_END_ALLOW_THREADS',
-              f'    for (int k = 0; k < {len(params) + 1}; k++)',
-              '        PyBuffer_Release(&view[k]);',
-              '    Py_RETURN_NONE;',
-              '}']
-    return '\n'.join(lines) + '\n', len(operations), n_out
+    return [f'static PyObject *kernel_{name}_many(PyObject *self, PyObject *const *args, '
+            f'Py_ssize_t nargs)', '{',
+            f'    static const Py_ssize_t width[{len(params) + 1}] = {{{widths}}};',
+            f'    Py_buffer view[{len(params) + 1}];',
+            f'    Py_ssize_t n = many_buffers(args, nargs, {len(params) + 1}, width, view, '
+            f'"{name}_many");',
+            '    if (n < 0)',
+            '        return NULL;',
+            '    Py_BEGIN_ALLOW_THREADS',
+            '    for (Py_ssize_t i = 0; i < n; i++)',
+            f'        body_{name}({pointers}, (double *)view[{len(params)}].buf + i * {n_out});',
+            '    Py_END_ALLOW_THREADS',
+            f'    for (int k = 0; k < {len(params) + 1}; k++)',
+            '        PyBuffer_Release(&view[k]);',
+            '    Py_RETURN_NONE;',
+            '}']
 
 
 def c_module_source(module, kernels):
@@ -440,7 +309,7 @@ def c_module_source(module, kernels):
     parameter) and a writable (N, outputs) array that receives the outputs of every sample
     in the order of ``fields``, flattened. Returns (source, {name: operations}).
     """
-    parts = [_C_PRELUDE % {'n_kernels': len(kernels)}]
+    parts = [c_prelude(len(kernels))]
     counts = {}
     for index, (name, params, _, fields) in enumerate(kernels):
         source, counts[name], _ = c_kernel_source(index, name, params, fields)

@@ -13,6 +13,71 @@ import numpy as np
 from .continuation import MAX_ANGLE
 from .errors import SetpointError
 
+#: the types of a control loop's setpoints (the fast path of setpoints)
+_FLOAT = {float}
+
+
+def setpoints(mechanism, wrapping, q, qd, qdd, limits=True):
+    """The one way setpoints come in: (q, qd, qdd, single).
+
+    One sample: three lists of M floats, checked: SetpointError for a value not finite, a
+    revolute actuator of ``wrapping`` (indices into active_joints) beyond +-MAX_ANGLE, or
+    (with ``limits``) an actuator outside its position limits. A batch: float arrays (N, M),
+    not checked here (the batch marks its bad samples, :func:`check_values`). SetpointError
+    'malformed' for anything else. The ways in, fastest first: a control loop's lists of
+    floats, taken as they are after one pass of checks; other sequences of M numbers and
+    float rows, converted; anything else as arrays (:func:`setpoint_arrays`), which also
+    says what is wrong."""
+    m = len(mechanism.active_joints)
+    if type(q) is list and type(qd) is list and type(qdd) is list and \
+            len(q) == len(qd) == len(qdd) == m:  # what a control loop passes: checked at once
+        every = q + qd + qdd        # floats (their types' set: one pass in C), finite, in range
+        if set(map(type, every)) == _FLOAT and all(map(math.isfinite, every)) \
+                and all(-MAX_ANGLE <= q[a] <= MAX_ANGLE for a in wrapping) \
+                and (not limits or within_limits(mechanism, q)):
+            return q, qd, qdd, True
+    sample = []
+    for value in (q, qd, qdd):
+        if value is None and sample:             # qd, qdd: zeros (q is required)
+            sample.append([0.0] * m)
+        elif type(value) is np.ndarray and value.ndim == 1 and value.dtype.kind == 'f':
+            sample.append(value.tolist())        # a row of a float array: one C call
+        elif (type(value) is list or type(value) is tuple) and \
+                all(type(x) is float or type(x) is int for x in value):
+            try:
+                sample.append([float(x) for x in value])
+            except OverflowError:
+                break
+        else:
+            break
+    else:
+        q_, qd_, qdd_ = sample
+        if len(q_) == len(qd_) == len(qdd_) == m and all(map(math.isfinite, q_ + qd_ + qdd_)) \
+                and all(-MAX_ANGLE <= q_[a] <= MAX_ANGLE for a in wrapping) \
+                and (not limits or within_limits(mechanism, q_)):
+            return q_, qd_, qdd_, True
+    q, qd, qdd, single = setpoint_arrays(mechanism, q, qd, qdd)
+    if not single:
+        return q, qd, qdd, False
+    q, qd, qdd = checked_sample(mechanism, wrapping, q, qd, qdd, limits)
+    return q, qd, qdd, True
+
+
+def checked_sample(mechanism, wrapping, q, qd, qdd, limits=True):
+    """One sample given as arrays (1, M) as three lists of floats, or the SetpointError
+    :func:`check_values` finds."""
+    _, errors = check_values(mechanism, wrapping, q, qd, qdd, True, limits)
+    if errors:
+        raise errors[0]
+    return q[0].tolist(), qd[0].tolist(), qdd[0].tolist()
+
+
+def rates(mechanism, qd):
+    """One sample of rates ``qd`` alone (M) as a list of floats, checked as :func:`setpoints`
+    checks rates."""
+    zeros = [0.0] * len(mechanism.active_joints)
+    return setpoints(mechanism, (), zeros, qd, zeros, limits=False)[1]
+
 
 def setpoint_arrays(mechanism, q, qd, qdd):
     """(q, qd, qdd) as float arrays of shape (N, M), and whether it was one sample.
@@ -24,7 +89,7 @@ def setpoint_arrays(mechanism, q, qd, qdd):
     m = len(names)
     if q is None:
         raise SetpointError(f'q: required, one position per active joint {names}')
-    arrays = [float_array(label, value, m) if value is not None else None
+    arrays = [_float_array(label, value, m) if value is not None else None
               for label, value in (('q', q), ('qd', qd), ('qdd', qdd))]
     single = arrays[0].ndim == 1
     out = []
@@ -39,46 +104,6 @@ def setpoint_arrays(mechanism, q, qd, qdd):
                 f'{label}: expected shape {expected} (active joints {names}), got {array.shape}')
         out.append(array.reshape(1, -1) if single else array)
     return out[0], out[1], out[2], single
-
-
-def one_sample(mechanism, wrapping, q, qd, qdd):
-    """(q, qd, qdd) as lists of floats when they are one well-formed sample in range,
-    else None (the general path then reports what is wrong)."""
-    m = len(mechanism.active_joints)
-    if type(q) is list and type(qd) is list and type(qdd) is list and \
-            len(q) == len(qd) == len(qdd) == m:  # what a control loop passes: checked at once
-        every = q + qd + qdd
-        if all(type(x) is float for x in every) and all(map(math.isfinite, every)) \
-                and all(-MAX_ANGLE <= q[a] <= MAX_ANGLE for a in wrapping) \
-                and within_limits(mechanism, q):
-            return q, qd, qdd
-    out = []
-    for value in (q, qd, qdd):
-        if value is None:
-            if not out:
-                return None                       # q is required
-            out.append([0.0] * m)
-            continue
-        if type(value) is np.ndarray:            # a row of a float array: one C call
-            if value.ndim != 1 or value.dtype.kind != 'f':
-                return None
-            floats = value.tolist()
-        elif type(value) is list or type(value) is tuple:
-            if not all(type(x) is float or type(x) is int for x in value):
-                return None
-            try:
-                floats = [float(x) for x in value]
-            except OverflowError:
-                return None
-        else:
-            return None
-        if len(floats) != m or not all(map(math.isfinite, floats)):
-            return None
-        out.append(floats)
-    if not all(-MAX_ANGLE <= out[0][a] <= MAX_ANGLE for a in wrapping) or \
-            not within_limits(mechanism, out[0]):
-        return None
-    return out
 
 
 def within_limits(mechanism, q):
@@ -124,7 +149,7 @@ def check_values(mechanism, wrapping, q, qd, qdd, single, limits=True):
     return finite & in_range, errors
 
 
-def float_array(label, value, m):
+def _float_array(label, value, m):
     """``value`` as a float array; a plain number is one sample when m == 1. SetpointError
     (reason 'malformed') for strings, mappings, booleans, ragged or non-numeric input."""
     if isinstance(value, (str, bytes, dict, bool, np.bool_)) or (

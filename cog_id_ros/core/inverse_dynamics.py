@@ -2,25 +2,26 @@
 
     one sample   inputs.py -> sample_solve.py (continuation, Newton) -> kernels.py
     N samples    inputs.py -> batch.py (arrays, checked by the serial rules)
+    per pose     poses.py (the closed poses of cog_poses, ..., equation_of_motion)
     the maths    pipeline.py: eqs. (1)-(7) at a closed pose, run by every path
 
 Successive calls keep the assembly branch: each is warm-started from the previous one.
 """
-import math
-from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import closure
 from . import spatial as sp
-from .batch import Batch, Evaluation, columns, pose_of, stacked
+from .batch import Batch, Evaluation
 from .cog_jacobian import cog_poses
-from .errors import CogIdError, MechanismConfigError, SetpointError, SingularConfigurationError
-from .inputs import check_values, float_array, one_sample, out_of_range, setpoint_arrays
-from .joint_motion import active_velocity_map, combine, velocity_basis
+from .errors import MechanismConfigError, SetpointError
+from .inputs import out_of_range, rates, setpoint_arrays, setpoints
+from .joint_motion import active_velocity_map, combine
 from .kernels import kernels_for
+from .lanes import stacked
 from .mechanism import Mechanism
 from .pipeline import cog_jacobians_at, cog_motion, equation_of_motion
+from .poses import PoseSolver
 from .sample_solve import SampleSolver
 
 ArrayLike = Union[float, Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -53,6 +54,7 @@ class InverseDynamics:
         self._backend = kernels.name
         self._serial = SampleSolver(solved, kernels, self.continuation_step)
         self._batch = Batch(solved, self._serial, mechanism.joints_at)
+        self._poses = PoseSolver(mechanism, self._serial, self._batch)
         self.reset()
 
     @property
@@ -75,15 +77,9 @@ class InverseDynamics:
         Raises ClosureError, SingularConfigurationError or SetpointError for the first sample
         that cannot be served (``.sample`` is its index); the warm start is then unchanged.
         """
-        sample = one_sample(self.mechanism, self._serial.wrapping, q, qd, qdd)
-        if sample is not None:                       # the control-rate path: plain floats
-            return np.array(self._serve_one(*sample))
-        q, qd, qdd, single = setpoint_arrays(self.mechanism, q, qd, qdd)
+        q, qd, qdd, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, qdd)
         if single:
-            _, errors = check_values(self.mechanism, self._serial.wrapping, q, qd, qdd, True)
-            if errors:
-                raise errors[0]
-            return np.array(self._serve_one(q[0].tolist(), qd[0].tolist(), qdd[0].tolist()))
+            return np.array(self._serve_one(q, qd, qdd))
         return self.evaluate(q, qd, qdd).torques
 
     def sample_torques(self, q: Sequence[float], qd: Optional[Sequence[float]] = None,
@@ -93,14 +89,11 @@ class InverseDynamics:
         The same numbers, state and errors as :meth:`torques` on one sample, without the
         numpy round trip (cog_id_node calls this for every setpoint).
         """
-        sample = one_sample(self.mechanism, self._serial.wrapping, q, qd, qdd)
-        if sample is not None:
-            return self._serve_one(*sample)
-        q, qd, qdd, single = setpoint_arrays(self.mechanism, q, qd, qdd)
+        q, qd, qdd, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, qdd)
         if not single:
             raise SetpointError(f'sample_torques takes one sample (one number per active '
                                 f'joint), got shape {q.shape}: use torques() for a batch')
-        return self.torques(q[0], qd[0], qdd[0]).tolist()    # reports what is wrong
+        return self._serve_one(q, qd, qdd)
 
     def evaluate(self, q: ArrayLike, qd: Optional[ArrayLike] = None,
                  qdd: Optional[ArrayLike] = None, on_invalid: str = 'raise') -> Evaluation:
@@ -110,7 +103,8 @@ class InverseDynamics:
             raise SetpointError(f"on_invalid must be 'raise' or 'skip', got {on_invalid!r}")
         q, qd, qdd, _ = setpoint_arrays(self.mechanism, q, qd, qdd)
         if len(q) == 1:
-            return self._evaluate_one(q[0], qd[0], qdd[0], on_invalid)
+            result, self._state = self._batch.evaluate_one(self._state, q, qd, qdd, on_invalid)
+            return result
         if len(q) == 0:
             m, empty = self.mechanism, np.zeros(q.shape)
             return Evaluation(empty, np.zeros(0, bool), [], np.zeros((0, len(m.joints))),
@@ -120,7 +114,7 @@ class InverseDynamics:
 
     def solve_positions(self, q: ArrayLike) -> np.ndarray:
         """Every joint coordinate (mechanism.joints order): (n_joints,) or (N, n_joints)."""
-        at = self._poses(q, None)
+        at = self._poses.at(self._state, q, None)
         return self._moved_to(at, at.positions)
 
     def solve_positions_by_name(self, q: ArrayLike) -> Dict[str, Union[float, np.ndarray]]:
@@ -147,28 +141,16 @@ class InverseDynamics:
         m, (q, basis) = self.mechanism, self._state
         if qd is None:
             return m.joints_at(q)[0].tolist(), None
-        n_act = len(m.active_joints)
-        rates = qd
-        if not (type(qd) is list and len(qd) == n_act and        # what the node passes
-                all(type(v) is float and math.isfinite(v) for v in qd)):
-            row = float_array('qd', qd, n_act)
-            if row.shape != (n_act,):
-                raise SetpointError(f'qd: expected shape ({n_act},) (active joints '
-                                    f'{m.active_joints}), got {row.shape}')
-            zeros = np.zeros((1, n_act))
-            _, errors = check_values(m, (), zeros, row[None], zeros, True, limits=False)
-            if errors:
-                raise errors[0]
-            rates = row.tolist()
-        qdot = combine(active_velocity_map(self._solved, basis, sp.ScalarOps), rates)
+        rates_in = rates(m, qd)
+        qdot = combine(active_velocity_map(self._solved, basis, sp.ScalarOps), rates_in)
         positions, qdot = m.joints_at(q, qdot)
         if not np.isfinite(qdot).all():
-            raise out_of_range(rates, [], None)
+            raise out_of_range(rates_in, [], None)
         return positions.tolist(), qdot.tolist()
 
     def cog_poses(self, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray]:
         """g_i (eq. 1): (positions (..., n_links, 3), rotations (..., n_links, 3, 3))."""
-        at = self._poses(q, None)
+        at = self._poses.at(self._state, q, None)
         cogs = cog_poses(self.mechanism, at.pose.frames)
         positions = self._moved_to(at, stacked([list(c) for c, _ in cogs]), keep=True)
         rotations = self._moved_to(at, stacked([list(r) for _, r in cogs]))
@@ -177,7 +159,7 @@ class InverseDynamics:
     def cog_jacobians(self, q: ArrayLike) -> np.ndarray:
         """G_i (eq. 3): (n_links, 6, M) or (N, n_links, 6, M); rows vx vy vz wx wy wz of the
         COG (linear) and the link (angular), base frame."""
-        at = self._poses(q, None, velocities=True)
+        at = self._poses.at(self._state, q, None, velocities=True)
         _, _, jac = cog_jacobians_at(self.mechanism, at.pose, at.basis, at.ops)
         return self._moved_to(at, stacked([[[gv[r] for gv, _ in cols] for r in range(3)] +
                                           [[gw[r] for _, gw in cols] for r in range(3)]
@@ -186,7 +168,7 @@ class InverseDynamics:
     def cog_drifts(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
         """Gdot_i thetadot (eq. 4): (n_links, 6) or (N, n_links, 6): COG acceleration and link
         angular acceleration when thetaddot = 0."""
-        at = self._poses(q, qd, velocities=True)
+        at = self._poses.at(self._state, q, qd, velocities=True)
         with np.errstate(all='ignore'):          # overflow is reported by _moved_to
             _, _, _, drifts = cog_motion(self.mechanism, at.pose, at.basis, at.rates, at.ops)
         return self._moved_to(at, stacked([list(a) + list(alpha) for a, alpha in drifts]))
@@ -194,98 +176,18 @@ class InverseDynamics:
     def equation_of_motion(self, q: ArrayLike, qd: Optional[ArrayLike] = None
                            ) -> Tuple[np.ndarray, np.ndarray]:
         """H (M, M) and B (M,) of eq. (7), tau = H qdd + B; batch: (N, M, M), (N, M)."""
-        at = self._poses(q, qd, solved=True)     # (the links as solved: the same H and B)
+        # (of the links as solved: the same H and B)
+        at = self._poses.at(self._state, q, qd, solved=True)
         with np.errstate(all='ignore'):          # overflow is reported by _moved_to
             h, b = equation_of_motion(self._solved, at.pose, at.basis, at.rates, at.ops)
         return self._moved_to(at, stacked(h), keep=True), self._moved_to(at, stacked(b))
 
     # --- helpers ------------------------------------------------------------------------
 
-    def _serve_one(self, target, qd, qdd, sample=None):
+    def _serve_one(self, target, qd, qdd):
         """Torques of one well-formed sample (lists of floats); the warm start moves on."""
-        record, self._state = self._solve_one(target, qd, qdd, sample)
+        record, self._state = self._serial.solve_torques(self._state, target, qd, qdd)
         return list(record.torques)
-
-    def _solve_one(self, target, qd, qdd, sample=None):
-        """(PoseRecord, new state) of one sample whose torques are finite, else the error
-        that says why; the warm start is not moved here."""
-        record, state = self._serial.solve(self._state, target, qd, qdd, sample)
-        if not all(map(math.isfinite, record.torques)):
-            raise out_of_range(qd, qdd, sample)
-        return record, state
-
-    def _evaluate_one(self, q, qd, qdd, on_invalid):
-        m, n_act = self.mechanism, len(q)
-        try:
-            _, errors = check_values(m, self._serial.wrapping, q[None], qd[None], qdd[None], True)
-            if errors:
-                raise errors[0]
-            record, state = self._solve_one(q.tolist(), qd.tolist(), qdd.tolist())
-        except CogIdError as exc:
-            if on_invalid == 'raise':
-                raise
-            at = np.array([self._state[0]])
-            return Evaluation(np.zeros((1, n_act)), np.array([False]), [exc],
-                              lambda: m.joints_at(at)[0], at[:, self._solved.active_index],
-                              np.array([getattr(exc, 'residual', math.inf)]),
-                              np.array([getattr(exc, 'condition_number', math.inf)]))
-        self._state = state
-        at = np.array([state[0]])
-        return Evaluation(np.array([record.torques]), np.array([True]), [None],
-                          lambda: m.joints_at(at)[0], at[:, self._solved.active_index],
-                          np.array([record.worst]),
-                          np.array([record.condition]))
-
-    def _poses(self, q, qd, solved=False, velocities=False):
-        """The closed poses of one sample or a batch (_Poses) of the mechanism as written
-        (of its solver form with ``solved``); the warm start is not moved until
-        :meth:`_moved_to` accepts a result. ``velocities``: the velocity basis is used, so
-        a chain of revolutes solved as a spherical joint (spherical_chains.py) must be away
-        from its gimbal lock, where the joints as written have no rates."""
-        m = self._solved if solved else self.mechanism
-        q, qd, _, single = setpoint_arrays(m, q, qd, None)
-        _, errors = check_values(m, self._serial.wrapping, q, qd, qd, single)
-        if errors:
-            raise errors[min(errors)]
-        n = len(m.joints)
-        if single:
-            state = self._serial.solve(self._state, q[0].tolist())[1]
-            at = m.coordinates_as_written(state[0]).tolist()
-            pose = closure.evaluate(m.model, at, m.free_joints, sp.ScalarOps)
-            basis = state[1] if self._solved is m else velocity_basis(m, pose)
-            at = _Poses(np.array(at[:n]), pose, basis, qd[0].tolist(), sp.ScalarOps, state,
-                        qd, single)
-        else:
-            with np.errstate(all='ignore'):
-                _, positions, _, _, state = self._batch.positions(self._state, q, 'raise')
-                coordinates = m.coordinates_as_written(positions)
-                pose, basis = pose_of(m, coordinates)
-            at = _Poses(coordinates[:, :n], pose, basis, columns(qd), sp.ArrayOps, state, qd,
-                        single)
-        if velocities and self._solved is not m:
-            self._away_from_locks(at)
-        return at
-
-    def _away_from_locks(self, at):
-        """SingularConfigurationError where the mechanism as written is singular at a pose
-        its solver form is not: a chain of three revolutes at its gimbal lock, whose rates
-        (and so the per-link quantities of the links as written) are not defined there."""
-        m = self.mechanism
-        with np.errstate(all='ignore'):
-            condition = np.atleast_1d(np.asarray(at.pose.lsq.condition_number(), float))
-        bad = np.flatnonzero(~(condition <= m.max_condition_number))
-        if bad.size:
-            k = int(bad[0])
-            chains = '; '.join(', '.join(chain.joints) for chain in m.spherical_chains)
-            raise SingularConfigurationError(
-                f'{"" if at.single else f"sample {k}: "}the joints as written are singular '
-                f'here (closure condition number {condition[k]:.3g} > '
-                f'mechanism.max_condition_number {m.max_condition_number:g}): a chain of three '
-                f'revolute joints solved as a spherical joint ({chains}) is at or near its '
-                f'gimbal lock, where its angles have no rates and the per-link quantities of '
-                f'its links as written are not defined; torques and equation_of_motion are '
-                f'(they are solved with the spherical joint)',
-                condition[k], None if at.single else k)
 
     def _moved_to(self, at, values, keep=False):
         """``values`` computed at ``at``, once known to be finite: the warm start moves to
@@ -299,14 +201,3 @@ class InverseDynamics:
         if not keep:
             self._state = at.state
         return values
-
-
-class _Poses(NamedTuple):
-    positions: np.ndarray      # every joint of mechanism.joints: (n_joints,) or (N, n_joints)
-    pose: object               # closure.ClosureSolution on floats or (N,) lanes
-    basis: list                # velocity basis V (list over joints)
-    rates: list                # thetadot as lanes
-    ops: type                  # spatial.ScalarOps or ArrayOps
-    state: tuple               # the warm start there
-    qd: np.ndarray             # (N, M), for messages
-    single: bool

@@ -14,22 +14,52 @@ The accelerations satisfy A qddot + beta = 0 (closure.closure_bias). With c any 
 (c_p = 0, c_f = -A_f^+ beta), qddot = S thetaddot + (c - S c_a): the last term is the
 drift, Gdot thetadot in the paper's eq. (4) once mapped onto the links.
 """
+import numpy as np
+
 from .lane_linalg import solve_spd
+
+
+class BasisLayout:
+    """How V is made of its rows: the free joints' rows (-T, as the lane code solves them or
+    a dynamics record returns them: kernels.PoseRecord.basis) and the primary actuators'
+    unit rows (I). The one place that puts them together, for one sample as a list over
+    joints (what the lane code and the kernels take) or as arrays."""
+
+    def __init__(self, mechanism):
+        m = mechanism
+        self.free = m.free_joints
+        self.shape = (m.n_coordinates, m.dof)
+        #: (joint, its row) of every primary actuator: constant, shared by every V made here
+        self.unit_rows = [(j, [1.0 if i == k else 0.0 for i in range(m.dof)])
+                          for k, j in enumerate(m.primary_joints)]
+
+    def rows(self, free_rows):
+        """V (a list over joints of rows over the primary actuators) from the rows of the
+        free joints, in mechanism.free_joints order."""
+        rows = [None] * self.shape[0]
+        for j, row in self.unit_rows:
+            rows[j] = row
+        for j, row in zip(self.free, free_rows):
+            rows[j] = row
+        return rows
+
+    def array(self, free_rows):
+        """V as an array (n_joints, dof) from the free rows (n_free, dof); of N samples
+        (N, n_joints, dof) from (N, n_free, dof)."""
+        free_rows = np.asarray(free_rows, dtype=float)
+        basis = np.zeros(free_rows.shape[:-2] + self.shape)
+        basis[..., self.free, :] = free_rows
+        for j, row in self.unit_rows:
+            basis[..., j, :] = row
+        return basis
 
 
 def velocity_basis(mechanism, sol):
     """V as a list over joints of lists over the ``dof`` primary actuators (lanes)."""
-    primary = mechanism.primary_joints
-    columns = [sol.columns[j] for j in primary]
+    columns = [sol.columns[j] for j in mechanism.primary_joints]
     t = [sol.lsq.solve(col) for col in columns]           # A_f^+ A_p, column by column
-    basis = [None] * mechanism.n_coordinates
-    for k, j in enumerate(primary):
-        row = [0.0] * len(primary)
-        row[k] = 1.0
-        basis[j] = row
-    for i, j in enumerate(mechanism.free_joints):
-        basis[j] = [-t[k][i] for k in range(len(primary))]
-    return basis
+    return BasisLayout(mechanism).rows([[-t[k][i] for k in range(len(columns))]
+                                        for i in range(len(mechanism.free_joints))])
 
 
 def projection_gram(mechanism, basis):

@@ -16,7 +16,7 @@ Backends (``InverseDynamics(mechanism, backend=...)``):
 
 * ``'reference'``: the lane code itself on Python floats (spatial.ScalarOps), nothing
   traced; the readable definition of the numbers.
-* ``'python'``: the same lane code traced once per mechanism (straight_line.py) into two
+* ``'python'``: the same lane code traced once per mechanism (straight_line.py) into three
   straight-line functions (emitter.py) with constants folded and common subexpressions
   shared. Same operations in the same order: the same numbers to the last bit.
 * ``'native'``: the same traced kernels written as C, compiled by the system's C
@@ -25,10 +25,12 @@ Backends (``InverseDynamics(mechanism, backend=...)``):
   ``'python'`` with one log line saying why; ``'reference'`` for a mechanism too large to
   trace quickly (:data:`TRACE_BUDGET`).
 """
+import functools
 import hashlib
 import logging
 import os
 from typing import NamedTuple
+import weakref
 
 import numpy as np
 
@@ -38,10 +40,12 @@ from .continuation import prediction
 from .emitter import c_module_source, python_function
 from .errors import MechanismConfigError
 from .joint_motion import projection_increment, velocity_basis
+from .lanes import columns, flat
 from .pipeline import inverse_dynamics
-from .straight_line import Graph, SymOps, leaves
+from .straight_line import Graph, SymOps
 
-BACKENDS = ('auto', 'reference', 'python', 'native')
+#: InverseDynamics(backend=...) choices, the fastest first after 'auto'
+BACKENDS = ('auto', 'native', 'python', 'reference')
 
 #: links x actuators above which 'auto' does not trace: the traced code grows with that
 #: product (about 8 operations each) and tracing costs ~3 kB per operation, so a large
@@ -145,8 +149,15 @@ class ReferenceKernels:
     name = 'reference'
 
     def __init__(self, mechanism):
-        self.mechanism = mechanism
+        self._mechanism = weakref.ref(mechanism)
         self.layouts = layouts(mechanism)
+
+    @property
+    def mechanism(self):
+        """The mechanism the kernels are made for. Held weakly, as by the cache
+        (:class:`KernelCache`): kernels are used beside their mechanism (a solver holds
+        both), and a mechanism and its kernels go together."""
+        return self._mechanism()
 
     def prediction(self, q, basis, goal):
         return prediction_record(self.mechanism, q, basis, goal)
@@ -158,26 +169,15 @@ class ReferenceKernels:
         return pose_record(self.mechanism, q, target, qd, qdd, sp.ScalarOps)
 
     def closure_many(self, q):
-        return _flat(closure_record(self.mechanism, _lanes(q), sp.ArrayOps)[1], len(q))
+        return flat(closure_record(self.mechanism, columns(q), sp.ArrayOps)[1], len(q))
 
     def dynamics_many(self, q, target, qd, qdd):
-        return _flat(pose_record(self.mechanism, *map(_lanes, (q, target, qd, qdd)),
-                                 sp.ArrayOps), len(q))
-
-
-def _lanes(array):
-    return [array[:, k] for k in range(array.shape[1])]
-
-
-def _flat(record, n):
-    values = leaves(list(record))
-    if not values:
-        return np.zeros((n, 0))
-    return np.column_stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in values])
+        return flat(pose_record(self.mechanism, *map(columns, (q, target, qd, qdd)),
+                                sp.ArrayOps), len(q))
 
 
 def trace(mechanism):
-    """Both kernels run once on symbolic lanes: [(name, params, record type, fields)], what
+    """The three kernels run once on symbolic lanes: [(name, params, record type, fields)], what
     the emitters (emitter.py) write as code."""
     m = mechanism
     graph = Graph()
@@ -256,27 +256,56 @@ def kernel_key(mechanism):
                  m.torque_weights)) + core_version()
 
 
+@functools.cache
 def core_version():
-    """A hash of the core's source files: what the kernels are made of."""
-    global _CORE_VERSION
-    if _CORE_VERSION is None:
-        digest = hashlib.sha256()
-        here = os.path.dirname(os.path.abspath(__file__))
-        for name in sorted(os.listdir(here)):
-            if name.endswith('.py'):
-                with open(os.path.join(here, name), 'rb') as f:
-                    digest.update(name.encode() + b'\0' + f.read())
-        _CORE_VERSION = digest.hexdigest()
-    return _CORE_VERSION
+    """A hash of the core's source files (its Python and the C of the kernels' prelude):
+    what the kernels are made of."""
+    digest = hashlib.sha256()
+    here = os.path.dirname(os.path.abspath(__file__))
+    for name in sorted(os.listdir(here)):
+        if name.endswith(('.py', '.c')):
+            with open(os.path.join(here, name), 'rb') as f:
+                digest.update(name.encode() + b'\0' + f.read())
+    return digest.hexdigest()
 
 
-_CORE_VERSION = None
+class KernelCache:
+    """The kernels made in this process, per mechanism and backend: a mechanism's traced and
+    compiled kernels are made once and shared by every solver of it (the node makes
+    several), and go when the mechanism goes (the cache holds the mechanism weakly, and so
+    do its kernels; the frozen Mechanism holds nothing of them). Also what this process has
+    said once: that compiled kernels are unavailable."""
+
+    def __init__(self):
+        self._made = weakref.WeakKeyDictionary()     # mechanism -> {backend: kernels}
+        #: the fallback to the Python kernels has been logged (it is said once per process)
+        self.fallback_said = False
+
+    def kernels(self, mechanism, backend, make):
+        """The ``backend`` kernels of ``mechanism``: ``make(mechanism)`` the first time."""
+        made = self._made.setdefault(mechanism, {})
+        kernels = made.get(backend)
+        if kernels is None:
+            kernels = made[backend] = make(mechanism)
+        return kernels
+
+    def say_fallback(self, why):
+        """Log, once per process, that the Python kernels serve where compiled ones were
+        wanted and ``why``."""
+        if not self.fallback_said:
+            _log.warning('cog_id_ros: compiled kernels unavailable (%s): using the '
+                         "Python kernels (backend='python')", why)
+            self.fallback_said = True
+
+
+#: the kernels of this process
+KERNELS = KernelCache()
 _log = logging.getLogger('cog_id_ros')
 
 
 def kernels_for(mechanism, backend='auto'):
     """The kernels of ``backend`` for a mechanism (traced and compiled kernels are made once
-    and shared by every solver of the mechanism).
+    and shared by every solver of the mechanism: :data:`KERNELS`).
 
     'auto': native where a C compiler (or a cached library) is there, else the Python
     kernels with one log line saying why; the reference kernels above TRACE_BUDGET."""
@@ -288,27 +317,12 @@ def kernels_for(mechanism, backend='auto'):
                                   TRACE_BUDGET):
         return ReferenceKernels(mechanism)
     if backend in ('auto', 'native'):
-        made = mechanism.kernels_made
-        kernels = made.get('native')
-        if kernels is None:
-            try:
-                kernels = made['native'] = NativeKernels(mechanism)
-            except native.NativeUnavailable as exc:
-                if backend == 'native':
-                    raise MechanismConfigError(
-                        'backend', f"'native' needs compiled kernels, and {exc}; use 'auto', "
-                                   f"'python' or 'reference'") from None
-                if not _warned_native:
-                    _log.warning('cog_id_ros: compiled kernels unavailable (%s): using the '
-                                 "Python kernels (backend='python')", exc)
-                    _warned_native.append(str(exc))
-                backend = 'python'
-        if backend != 'python':
-            return kernels
-    kernels = mechanism.kernels_made.get('python')
-    if kernels is None:
-        kernels = mechanism.kernels_made['python'] = PythonKernels(mechanism)
-    return kernels
-
-
-_warned_native = []     # the fallback is said once per process
+        try:
+            return KERNELS.kernels(mechanism, 'native', NativeKernels)
+        except native.NativeUnavailable as exc:
+            if backend == 'native':
+                raise MechanismConfigError(
+                    'backend', f"'native' needs compiled kernels, and {exc}; use 'auto', "
+                               f"'python' or 'reference'") from None
+            KERNELS.say_fallback(exc)
+    return KERNELS.kernels(mechanism, 'python', PythonKernels)

@@ -102,8 +102,6 @@ class Mechanism:
                 'mechanism.initial_positions',
                 f'the mechanism could not be analysed at these positions ({exc}); check the '
                 f'geometry and initial_positions') from None
-        #: kernels made for this mechanism, by backend (kernels.kernels_for): they go with it
-        self.kernels_made = {}
         self._solver_form()
         # what the kernels are made of stays what it was read as: read-only from here on
         self._frozen = True

@@ -1,6 +1,6 @@
 """Compiled kernels: the traced kernels as C, built by the system's C compiler, cached on disk.
 
-``backend='native'`` (and ``'auto'`` where it can) writes the mechanism's two kernels as a
+``backend='native'`` (and ``'auto'`` where it can) writes the mechanism's three kernels as a
 CPython extension module (emitter.c_module_source), compiles it once and keeps the library
 in a cache directory keyed by a hash of what it is made of (the mechanism's model as read and
 the core's source, kernels.kernel_key), the Python version, the flags and ``$CC`` if set:
@@ -71,7 +71,7 @@ import time
 FLAGS = ['-shared', '-fPIC', '-ffp-contract=off', '-fno-fast-math',
          '-fno-unsafe-math-optimizations']
 
-#: operations (both kernels) above which the first build is -O0 and -O2 follows in background
+#: operations (the three kernels') above which the first build is -O0, -O2 following in background
 QUICK_ABOVE = 6000
 
 #: seconds a build may take before it counts as failed (the compiler is then stopped)

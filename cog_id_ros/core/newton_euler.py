@@ -20,9 +20,3 @@ def newton_euler_force(mass, inertia_link, rot, gravity, acceleration, omega, al
     moment = sp.add(rotated_inertia_times(rot, inertia_link, alpha),
                     sp.cross(omega, rotated_inertia_times(rot, inertia_link, omega)))
     return force, moment
-
-
-def inertia_bias(mass, inertia_link, rot, gravity, omega):
-    """b(q_i, qdot_i) of eq. (5): [-m g; w x I w]."""
-    return (sp.scale(gravity, -mass),
-            sp.cross(omega, rotated_inertia_times(rot, inertia_link, omega)))

@@ -17,6 +17,7 @@ here.
 """
 import math
 
+from .closure import loops_closed
 from .continuation import (
     MAX_STEPS,
     MIN_STEP,
@@ -31,7 +32,8 @@ from .continuation import (
     wrapping_actuators,
 )
 from .errors import ClosureError, SingularConfigurationError
-from .joint_motion import projected_pose
+from .inputs import out_of_range
+from .joint_motion import BasisLayout, projected_pose
 
 #: Newton iterations of one continuation step (from a first-order prediction within the
 #: step limits Newton converges in a few; more means the step is too long: it is halved)
@@ -74,9 +76,7 @@ class SampleSolver:
         self.tolerance = m.closure_tolerance
         self.redundant = m.is_redundant
         self.zeros = [0.0] * len(m.active_joints)
-        # the velocity basis rows of the primary actuators are constant unit rows
-        self.unit_rows = [(j, [1.0 if i == k else 0.0 for i in range(m.dof)])
-                          for k, j in enumerate(m.primary_joints)]
+        self.layout = BasisLayout(m)
 
     def solve(self, state, target, qd=None, qdd=None, sample=None):
         """(PoseRecord at ``target``, new state) by continuation from ``state``."""
@@ -136,6 +136,14 @@ class SampleSolver:
         raise unreachable(m, start, target, sample,
                           f'not reached in {MAX_STEPS} continuation steps')
 
+    def solve_torques(self, state, target, qd, qdd, sample=None):
+        """:meth:`solve`, and SetpointError (reason 'out_of_range') where the torques there
+        are not finite; the warm start is the caller's."""
+        record, state = self.solve(state, target, qd, qdd, sample)
+        if not all(map(math.isfinite, record.torques)):
+            raise out_of_range(qd, qdd, sample)
+        return record, state
+
     def step(self, predicted, goal, final, qd, qdd, sample):
         """One continuation step: close the loops from ``predicted``, check, and on the final
         step of a redundant mechanism project onto ``goal``. Returns (PoseRecord, new state,
@@ -149,7 +157,7 @@ class SampleSolver:
             q, record = self.project(q, record, goal, qd, qdd, sample)
         if not record.condition <= m.max_condition_number:
             raise singular(m, record.condition, sample)
-        return record, (q, self.basis(record)), closed
+        return record, (q, self.layout.rows(record.basis)), closed
 
     def close(self, q, goal, qd, qdd, likely_closed=False):
         """Newton's method on the loop equations from ``q``, moving the free joints.
@@ -162,7 +170,7 @@ class SampleSolver:
         whole = likely_closed
         record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
-            if record.worst < tol and record.least_cosine > 0.0:
+            if loops_closed(record.worst, record.least_cosine, tol):
                 if not whole:
                     record = kernels.dynamics(q, goal, qd, qdd)
                 return q, record, iteration, True
@@ -206,12 +214,7 @@ class SampleSolver:
 
     def basis(self, record):
         """The velocity basis V (list over joints) from a record's rows of the free joints."""
-        rows = [None] * self.mechanism.n_coordinates
-        for j, row in self.unit_rows:
-            rows[j] = row
-        for j, row in zip(self.free, record.basis):
-            rows[j] = row
-        return rows
+        return self.layout.rows(record.basis)
 
 
 def _where(sample):

@@ -3,9 +3,9 @@
     cog_id_torques --params-file config/X.yaml --input traj.csv --output torques.csv \
         [--plot torques.png]
 
-Reads the trajectory (:mod:`cog_id_ros.trajectory_io`), estimates absent velocities and
-accelerations (:mod:`cog_id_ros.derivatives`), solves the samples in chunks on the core's
-batch path (``InverseDynamics.evaluate``; chunking is exact because the solver
+Reads the trajectory (:mod:`cog_id_ros.offline.trajectory_io`), estimates absent velocities
+and accelerations (:mod:`cog_id_ros.offline.derivatives`), solves the samples in chunks on the
+core's batch path (``InverseDynamics.evaluate``; chunking is exact because the solver
 warm-starts across calls), writes the efforts and the plot atomically, and prints a
 summary. No ROS import: the tool runs wherever numpy does.
 """
@@ -23,6 +23,7 @@ import time as _time
 
 import numpy as np
 
+from ..core.kernels import BACKENDS
 from . import derivatives, trajectory_io
 from .trajectory_io import TrajectoryError
 
@@ -226,7 +227,7 @@ def build_parser():
                              "equivalent nearest the previous row's (for encoders of continuous "
                              'joints that report angles in (-pi, pi]); prismatic columns are '
                              'untouched; the summary says how many rows were shifted')
-    parser.add_argument('--backend', choices=('auto', 'native', 'python', 'reference'),
+    parser.add_argument('--backend', choices=BACKENDS,
                         default='auto',
                         help='who computes the kernels: auto (compiled C where a C compiler '
                              'is there, else Python), native, python (never compile), '

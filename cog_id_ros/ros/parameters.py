@@ -18,6 +18,7 @@ import sys
 from typing import Any, Callable, Sequence
 
 from ..core import MechanismConfigError, joints
+from ..core.kernels import BACKENDS
 
 #: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters):
 #: the native form (links.*, joints.*) and the URDF form (loop_closures.*; docs/urdf.md)
@@ -32,9 +33,6 @@ def is_mechanism_parameter(name: str) -> bool:
 
 
 TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
-
-#: InverseDynamics(backend=...) choices
-BACKENDS = ('auto', 'native', 'python', 'reference')
 
 #: max_setpoint_step when the parameter is not given, by the unit of the joint's coordinate
 #: (its kind's ``unit``: an angle, a length)

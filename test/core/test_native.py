@@ -1,13 +1,16 @@
 """Compiled kernels: built once, cached on disk, and never required.
 
-Each test uses a cache directory of its own (``COG_ID_ROS_CACHE``) and a fresh Mechanism
-(kernels are shared per Mechanism object within a process).
+Each test uses a cache directory of its own (``COG_ID_ROS_CACHE``), a kernel cache of its own
+(kernels.KERNELS, as a new process has) and a fresh Mechanism (kernels are shared per
+Mechanism object within a process).
 """
+import gc
 import glob
 import logging
 import os
 import shutil
 import time
+import weakref
 
 from mechanisms import from_yaml
 import numpy as np
@@ -27,7 +30,7 @@ def fresh(name='paper_four_bar_a'):
 def cache(tmp_path, monkeypatch):
     directory = tmp_path / 'cache'
     monkeypatch.setenv('COG_ID_ROS_CACHE', str(directory))
-    monkeypatch.setattr(kernels, '_warned_native', [])
+    monkeypatch.setattr(kernels, 'KERNELS', kernels.KernelCache())   # a process of its own
     return directory
 
 
@@ -53,6 +56,30 @@ def test_the_first_load_builds_and_caches_and_the_next_needs_no_compiler(cache, 
     assert np.array_equal(again.torques([1.6], [0.3], [1.0]), expected)
     assert kernels.kernels_for(again.mechanism, 'native').operations == \
         kernels.kernels_for(fresh(), 'python').operations
+
+
+def test_a_mechanism_is_compiled_once_however_many_solvers_and_its_kernels_go_with_it(
+        cache, monkeypatch):
+    builds, loads = [], []
+    build, load = native._build_and_load, native.load_module
+    monkeypatch.setattr(native, '_build_and_load', lambda *a: builds.append(a[4]) or build(*a))
+    monkeypatch.setattr(native, 'load_module', lambda *a: loads.append(a[0]) or load(*a))
+    mechanism = fresh()
+    solvers = [cog_id_ros.InverseDynamics(mechanism, backend=backend)     # as the node does
+               for backend in ('auto', 'native', 'native', 'auto')]
+    assert [s.backend for s in solvers] == ['native'] * 4
+    assert len(builds) == 1 and len(loads) == 1 and len(libraries(cache, 'O2')) == 1
+    compiled = kernels.kernels_for(mechanism, 'native')
+    assert compiled is kernels.kernels_for(mechanism, 'auto')
+    assert not hasattr(mechanism, 'kernels_made')       # the cache is beside the kernels
+    assert all(np.array_equal(s.torques([1.6], [0.3], [1.0]), solvers[0].torques([1.6], [0.3],
+                                                                              [1.0]))
+               for s in solvers)
+    gone = weakref.ref(compiled), weakref.ref(mechanism)
+    del solvers, compiled, mechanism
+    gc.collect()
+    assert gone[0]() is None and gone[1]() is None     # a mechanism and its kernels go together
+    assert len(loads) == 1
 
 
 def test_a_changed_mechanism_is_a_new_library(cache):

@@ -47,7 +47,7 @@ def fresh(name='paper_four_bar_a', **changes):
 def cache(tmp_path, monkeypatch):
     directory = tmp_path / 'cache'
     monkeypatch.setenv('COG_ID_ROS_CACHE', str(directory))
-    monkeypatch.setattr(kernels, '_warned_native', [])
+    monkeypatch.setattr(kernels, 'KERNELS', kernels.KernelCache())   # a process of its own
     monkeypatch.setattr(native, '_failed', {}, raising=False)
     monkeypatch.setattr(native, '_said', set(), raising=False)
     return directory

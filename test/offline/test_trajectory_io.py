@@ -1,5 +1,5 @@
 """CSV trajectories: parsing, every rejection with its row and column, derivative filling,
-and atomic writing (cog_id_ros.trajectory_io; no solver involved)."""
+and atomic writing (cog_id_ros.offline.trajectory_io; no solver involved)."""
 import os
 import stat
 

@@ -1,4 +1,5 @@
-"""ros_conversions: core errors mapped to rejection reasons by their ``reason`` attribute."""
+"""cog_id_ros.ros.conversions: core errors mapped to rejection reasons by their ``reason``
+attribute."""
 import pytest
 
 pytest.importorskip('rclpy')
