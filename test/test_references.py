@@ -19,6 +19,7 @@ What counts as a reference (what these texts spell; anything else is prose):
 A failure names the file and line of every reference that does not resolve.
 """
 import ast
+import dataclasses
 import functools
 import importlib
 import inspect
@@ -37,6 +38,10 @@ PACKAGE = os.path.join(REPO, 'cog_id_ros')
 
 #: first components that spell parameter names (mechanism.active_joints, joints.<name>.type)
 PARAMETER_NAMESPACES = {'mechanism', 'joints'}
+#: a backticked name ending so is a file, not a module's attribute (importing `setup` to
+#: look up `cfg` would run the package's setup.py)
+FILE_SUFFIXES = {'py', 'cfg', 'txt', 'md', 'yaml', 'yml', 'csv', 'urdf', 'png', 'c', 'h', 'so',
+                 'json', 'toml', 'xml', 'sha256', 'lock', 'tmp'}
 
 ABSOLUTE = re.compile(r'(?<![\w.])cog_id_ros(?:\.[A-Za-z_]\w*)+')
 PATH = re.compile(r'(?<![\w./-])((?:[\w.-]+/)*\w+\.py)\b(?![\w/])')
@@ -122,6 +127,8 @@ def instance_attributes(cls):
             if isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store) and \
                     isinstance(node.value, ast.Name) and node.value.id == 'self':
                 names.add(node.attr)
+        if dataclasses.is_dataclass(klass):          # fields without a default
+            names.update(field.name for field in dataclasses.fields(klass))
     return names
 
 
@@ -182,8 +189,8 @@ def short(name):
     class or constant of one names a module that is gone (``ros_conversions.trajectory_process``
     for ``cog_id_ros.ros.conversions.trajectory_process``)."""
     first, *rest = name.split('.')
-    if first in PARAMETER_NAMESPACES:
-        return False, True
+    if first in PARAMETER_NAMESPACES or rest[-1] in FILE_SUFFIXES:
+        return False, True      # a parameter's name, or a file (`setup.cfg`): never imported
     modules = package_modules().get(first, [])
     classes = package_classes().get(first, [])
     if not modules and not classes:
@@ -207,7 +214,13 @@ def role(name, module, cls):
     if name.startswith('cog_id_ros.'):
         return absolute(name)
     if name.startswith('.') and module is not None:
-        return absolute(module.rsplit('.', 1)[0] + name)
+        # Sphinx's leading dot: the docstring's module, its package, then any module of the
+        # package that has it (``:class:`.NodeConfig``` in ros/node.py is ros/config.py's)
+        package = module if hasattr(importlib.import_module(module), '__path__') else \
+            module.rsplit('.', 1)[0]
+        path = name[1:].split('.')
+        return (absolute(module + name) or absolute(package + name) or
+                any(in_module(m, path) for ms in package_modules().values() for m in ms))
     path = name.split('.')
     if module is not None:
         here = importlib.import_module(module)

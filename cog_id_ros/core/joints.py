@@ -149,8 +149,8 @@ class JointKind:
                              origin_p=a[1])], []
 
     def place(self, frames, e, q, ops):
-        """calc_X_FM and S: the pose of tree edge ``e``'s child link (``frames.rot``,
-        ``frames.pos``) and the unit twist ``frames.xi[c]`` of each of its coordinates c,
+        """calc_X_FM and S: the pose of tree edge ``e``'s child link (``rot`` and ``pos`` of
+        ``frames``) and the unit twist ``xi[c]`` of ``frames`` of each of its coordinates c,
         from the coordinates ``q`` (lanes) and its parent's frame."""
         frames.rot[e.child], frames.pos[e.child] = kin.to_base(frames, e.parent, e.r0, e.t0)
 
@@ -184,7 +184,8 @@ class JointKind:
     # --- closing a loop (closure.py) --------------------------------------------------------
 
     def loop_twist(self, frames, lp):
-        """The unit twist ``frames.xi`` of its own coordinate where it closes loop ``lp``."""
+        """The unit twist (``xi`` of ``frames``) of its own coordinate where it closes loop
+        ``lp``."""
 
     def moved_attachment(self, lp, q, ops):
         """(rotation, origin) in the parent link of its parent attachment frame moved by

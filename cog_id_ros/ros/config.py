@@ -3,7 +3,7 @@
 Made once from the declared values of ``NODE_PARAMETERS`` (:mod:`.parameters`, the one
 table) and the mechanism; the node and its trajectory process both take it (it crosses to
 the spawned process pickled). Every parameter of the table is an attribute by its name
-(``config.setpoint_timeout``): a parameter added to the table needs no edit here nor in
+(a NodeConfig's ``setpoint_timeout``): a parameter added to the table needs no edit here nor in
 the node's constructor.
 """
 import dataclasses

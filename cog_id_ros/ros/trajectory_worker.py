@@ -25,7 +25,7 @@ class TrajectoryWorker:
 
     Nothing here waits without a bound: the process has ``STARTUP_BOUND`` s to say it is
     ready (its kernels loaded or compiled) and :meth:`answer_bound` s to answer a
-    trajectory (``config.trajectory_timeout`` plus ``SECONDS_PER_POINT`` a point); a process
+    trajectory (the ``trajectory_timeout`` parameter plus ``SECONDS_PER_POINT`` a point); a process
     that dies (killed, out of memory) or does not answer in time (stopped, stuck) is
     killed, the trajectory in progress is answered with ('internal', text) and a new process
     is started for the next one. :meth:`stop` kills a process that does not end within its
