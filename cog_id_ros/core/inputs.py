@@ -1,6 +1,6 @@
 """What the solver accepts: setpoints checked and turned into floats before any maths.
 
-The input contract (README, "Python API"): ``q`` is required, ``qd`` and ``qdd`` default to
+The input contract (docs/api.md): ``q`` is required, ``qd`` and ``qdd`` default to
 zeros; one sample is (M,) (a plain number when M = 1), a batch (N, M); anything else is a
 SetpointError with reason 'malformed'; NaN or infinity 'non_finite'; a revolute actuator
 beyond +-MAX_ANGLE rad, or torques that overflow, 'out_of_range'; an actuator outside its

@@ -135,7 +135,7 @@ class InverseDynamics:
         :meth:`torques` on one sample, the pose its torques were computed at; after
         :meth:`reset`, the assembled initial_positions. A call that raised leaves it where it
         was. ``qdot``: with ``qd`` (M rates in active_joints order), the rates of every joint
-        there, qdot = S qd (README: the joint-rate map S of redundant actuation); None
+        there, qdot = S qd (docs/api.md: the joint-rate map S of redundant actuation); None
         without ``qd``.
         """
         m, (q, basis) = self.mechanism, self._state

@@ -1,6 +1,6 @@
 """Mechanism: a validated description of links, joints and actuators, ready to solve.
 
-Built from the native parameters (README, "Mechanism parameter file", and
+Built from the native parameters (docs/parameter_file.md, and
 docs/mechanism.md for the limits and defaults): the dotted names rclpy gives a node, or a
 nested dict. Files and other forms are read outside the core: ``cog_id_ros.Mechanism``
 (:mod:`cog_id_ros.description.mechanism`) is this class with ``from_params_file`` and

@@ -4,7 +4,7 @@ URDF describes a tree; a closed-link mechanism is that tree plus the joints that
 loops. The URDF form of the parameters gives the tree as a URDF (``robot_description``, the
 URDF as a string, or ``mechanism.urdf_file``) and the loop-closing joints as
 ``loop_closures.<name>.*``, listed in ``mechanism.loop_closures``. :func:`native_parameters`
-turns that into the native dotted names the core reads (README, "Mechanism parameter file"):
+turns that into the native dotted names the core reads (docs/parameter_file.md):
 ``mechanism.links``, ``mechanism.joints``, ``links.<l>.*``, ``joints.<j>.*`` and a list of
 ``mechanism.initial_positions``. File formats stay out of :mod:`cog_id_ros.core`:
 ``cog_id_ros.Mechanism.from_parameters`` (:mod:`.mechanism`) calls this module when it is

@@ -31,8 +31,8 @@ ROS 2 parameter file, e.g.
 A parameter that cannot be honoured ends the node with exit status 2 and one line naming
 it. Ctrl-C or SIGTERM stop it (exit status 0).
 
-Documentation: docs/node.md (topics, parameters, diagnostics) and README.md (the
-mechanism parameter file) of the cog_id_ros package.
+Documentation: docs/node.md (topics, parameters, diagnostics) and
+docs/parameter_file.md (the mechanism parameter file) of the cog_id_ros package.
 """  # noqa: E501 (the usage line as printed)
 
 

@@ -207,7 +207,7 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     '`timeout_behavior: none`)'),
     NodeParameter(
         'backend', 'string', 'auto', 'choice', choices=BACKENDS,
-        description="who computes the kernels (README, 'How it computes'): `auto` compiled C "
+        description="who computes the kernels (docs/how_it_computes.md): `auto` compiled C "
                     'where a C compiler or a cached library is there, else Python; `native` '
                     'compiled C or refuse to start; `python` never compile; `reference` the '
                     'plain lane code (slow: for checking)'),
@@ -299,7 +299,7 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
 #: (name, type, default, accepted values, meaning)
 OTHER_PARAMETERS = (
     ('`mechanism.*`, `links.*`, `joints.*`', '', '', '',
-     'the mechanism (README, "Mechanism parameter file")'),
+     'the mechanism (docs/parameter_file.md)'),
     ('`robot_description`, `mechanism.urdf_file`, `mechanism.loop_closures`, '
      '`loop_closures.*`, `mechanism.initial_positions.<joint>`', '', '', '',
      "the mechanism in the URDF form instead (docs/urdf.md): the URDF as a string (ROS's "
