@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core import kernels, native
+from cog_id_ros.core import kernels, native, native_cache
 
 pytestmark = pytest.mark.skipif(native.compiler() is None, reason='no C compiler here')
 
@@ -166,7 +166,7 @@ def test_bad_input_to_a_compiled_kernel_is_a_python_error_not_a_crash(cache):
 def test_libraries_unused_for_a_month_are_pruned_when_another_is_built(cache):
     cog_id_ros.InverseDynamics(fresh(), backend='native')
     old = glob.glob(str(cache / '*.json'))[0]
-    month_ago = time.time() - (native.KEEP_DAYS + 1) * 86400.0
+    month_ago = time.time() - (native_cache.KEEP_DAYS + 1) * 86400.0
     os.utime(old, (month_ago, month_ago))
     cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
     assert not os.path.exists(old) and not glob.glob(old[:-len('.json')] + '.*')
