@@ -4,11 +4,14 @@ Each test uses a cache directory of its own (``COG_ID_ROS_CACHE``), a kernel cac
 (kernels.KERNELS, as a new process has) and a fresh Mechanism (kernels are shared per
 Mechanism object within a process).
 """
+import ast
 import gc
 import glob
 import logging
 import os
+from pathlib import Path
 import shutil
+import sys
 import time
 import weakref
 
@@ -17,7 +20,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core import kernels, native
+from cog_id_ros.core import kernels, native, native_build, native_cache
 
 pytestmark = pytest.mark.skipif(native.compiler() is None, reason='no C compiler here')
 
@@ -151,6 +154,20 @@ def test_large_kernels_load_quickly_and_are_optimised_in_the_background(cache, m
     assert np.array_equal(again.torques([0.4], [1.0], [0.0]), solver.torques([0.4], [1.0], [0.0]))
 
 
+def test_the_background_build_needs_nothing_but_the_standard_library():
+    """The detached -O2 build loads native_build.py by its path, without the package (its
+    relative imports would fail there): that module imports the standard library only."""
+    tree = ast.parse(Path(native_build.__file__).read_text(encoding='utf-8'))
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            imported.add('.' * node.level + (node.module or ''))
+    assert imported and {name for name in imported
+                         if name.split('.')[0] not in sys.stdlib_module_names} == set()
+
+
 def test_bad_input_to_a_compiled_kernel_is_a_python_error_not_a_crash(cache):
     compiled = kernels.kernels_for(fresh(), 'native')
     with pytest.raises(ValueError, match='q: expected 4 values'):
@@ -166,7 +183,7 @@ def test_bad_input_to_a_compiled_kernel_is_a_python_error_not_a_crash(cache):
 def test_libraries_unused_for_a_month_are_pruned_when_another_is_built(cache):
     cog_id_ros.InverseDynamics(fresh(), backend='native')
     old = glob.glob(str(cache / '*.json'))[0]
-    month_ago = time.time() - (native.KEEP_DAYS + 1) * 86400.0
+    month_ago = time.time() - (native_cache.KEEP_DAYS + 1) * 86400.0
     os.utime(old, (month_ago, month_ago))
     cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
     assert not os.path.exists(old) and not glob.glob(old[:-len('.json')] + '.*')

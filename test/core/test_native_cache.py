@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core import kernels, native
+from cog_id_ros.core import kernels, native, native_build
 
 ROOT = Path(__file__).resolve().parents[2]
 OTHER_UID = 65534
@@ -48,8 +48,7 @@ def cache(tmp_path, monkeypatch):
     directory = tmp_path / 'cache'
     monkeypatch.setenv('COG_ID_ROS_CACHE', str(directory))
     monkeypatch.setattr(kernels, 'KERNELS', kernels.KernelCache())   # a process of its own
-    monkeypatch.setattr(native, '_failed', {}, raising=False)
-    monkeypatch.setattr(native, '_said', set(), raising=False)
+    monkeypatch.setattr(native, 'PROCESS', native.ProcessMemory())  # nothing failed or said
     return directory
 
 
@@ -327,7 +326,7 @@ def test_without_a_home_the_kernels_are_built_for_the_process_not_in_slash_cache
         monkeypatch.delenv('HOME', raising=False)
     else:
         monkeypatch.setenv('HOME', home)
-    monkeypatch.setattr(native, '_said', set(), raising=False)
+    monkeypatch.setattr(native, 'PROCESS', native.ProcessMemory())   # nothing said yet
     assert native.cache_directory() is None
     existed = os.path.exists('/.cache/cog_id_ros')
     with caplog.at_level(logging.WARNING, logger='cog_id_ros'):
@@ -429,7 +428,7 @@ def test_debris_of_builds_that_died_is_pruned_when_a_build_happens(cache, hung):
     killed = temporary_files(cache)
     assert killed                              # what such a build leaves
     # and what earlier versions of the cache left (mkstemp's default names)
-    for name in ('tmpa1b2c3d4' + native._suffix(), 'tmpe5f6g7h8.tmp'):
+    for name in ('tmpa1b2c3d4' + native_build.library_suffix(), 'tmpe5f6g7h8.tmp'):
         (cache / name).write_bytes(b'\0' * 100)
     long_ago = time.time() - native.BUILD_TIMEOUT - 3600.0
     for name in temporary_files(cache):
