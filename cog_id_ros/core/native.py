@@ -77,6 +77,7 @@ from .native_cache import (
     library_paths,
     open_cache,
     open_directory,
+    open_file,
     prune,
     touch,
 )
@@ -165,6 +166,10 @@ def _cached(directory: str | None,
         return None, False
     try:
         found = load_cached(cache, directory, name, PROCESS.loaded)
+        if found is not None and found[2] == 'O0':
+            # the -O2 build below compiles the cached source: it must be as much one's own
+            # as the libraries (whoever could write it would run code at the next load)
+            _check_source(cache, directory, name)
     except Untrusted as exc:
         PROCESS.say_untrusted(directory, str(exc))
         return None, False                    # neither read nor written from now on
@@ -177,6 +182,15 @@ def _cached(directory: str | None,
     if level == 'O0':                         # an -O2 build that never finished: again
         _build_in_background(compiler(), directory, name)
     return (module, operations), False
+
+
+def _check_source(cache: int, directory: str, name: str) -> None:
+    """Untrusted unless the cached C source of ``name`` (in the open cache directory
+    ``cache``) is a file of this user that group and others may not write."""
+    opened, _ = open_file(cache, os.path.basename(library_paths(directory, name)['c']),
+                          directory)
+    if opened is not None:
+        os.close(opened)
 
 
 def _flags(level: str, include: str) -> list[str]:

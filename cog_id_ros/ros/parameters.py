@@ -207,7 +207,7 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     '`timeout_behavior: none`)'),
     NodeParameter(
         'backend', 'string', 'auto', 'choice', choices=BACKENDS,
-        description="who computes the kernels (docs/how_it_computes.md): `auto` compiled C "
+        description='who computes the kernels (docs/how_it_computes.md): `auto` compiled C '
                     'where a C compiler or a cached library is there, else Python; `native` '
                     'compiled C or refuse to start; `python` never compile; `reference` the '
                     'plain lane code (slow: for checking)'),

@@ -497,3 +497,31 @@ def test_a_lock_dated_in_the_future_does_not_hold_up_the_optimised_build(cache, 
     said = [r.getMessage() for r in caplog.records if lock in r.getMessage()]
     assert len(said) == 1 and 'future' in said[0], said
     assert wait_until(lambda: libraries(cache, 'O2') and not os.path.exists(lock), 30.0)
+
+
+@needs_cc
+def test_a_cached_source_another_user_may_write_is_not_compiled(cache, monkeypatch, caplog):
+    """Reliability 2, adversarial check: with a library cached at -O0, the next load started
+    the -O2 build from the cached C source without checking whose it was; another user who
+    could write it had their code compiled in, and the load after that ran it as root. The
+    source must be one's own like the libraries: else nothing of that cache is used (the
+    kernels are built for this process only, one log line says why) and nothing compiles
+    it."""
+    monkeypatch.setattr(native, 'QUICK_ABOVE', 0)
+    cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
+    assert wait_until(lambda: libraries(cache, 'O2') and not glob.glob(str(cache / '*.lock')),
+                      60.0)
+    optimised, = libraries(cache, 'O2')
+    os.unlink(optimised + '.sha256')           # as if the -O2 build had never finished
+    os.unlink(optimised)
+    source, = glob.glob(str(cache / '*.c'))
+    why = hand_to_another_user(source)
+    monkeypatch.setattr(native, 'PROCESS', native.ProcessMemory())   # a new process
+    monkeypatch.setattr(kernels, 'KERNELS', kernels.KernelCache())
+    with caplog.at_level(logging.WARNING, logger='cog_id_ros'):
+        solver = cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
+    assert solver.backend == 'native'
+    said = [r.getMessage() for r in caplog.records if source in r.getMessage()]
+    assert len(said) == 1 and why in said[0], said
+    time.sleep(1.0)                            # a background build would have begun by now
+    assert not libraries(cache, 'O2') and not glob.glob(str(cache / '*.lock'))
