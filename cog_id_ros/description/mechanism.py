@@ -4,8 +4,9 @@ The core's Mechanism (:mod:`cog_id_ros.core.mechanism`) is made from the native 
 parameters and knows no file format. This module adds the two ways users make one
 (docs/parameter_file.md, docs/mechanism.md, docs/urdf.md):
 :meth:`Mechanism.from_params_file` (a ROS 2 parameter file, :mod:`.params_file`) and
-:meth:`Mechanism.from_parameters` (a dict, native or in the URDF form, :mod:`.urdf`), which turn what they are given into the native
-parameters (:func:`native_form`) and hand them to the core.
+:meth:`Mechanism.from_parameters` (a dict, native or in the URDF form, :mod:`.urdf`),
+which turn what they are given into the native parameters (:func:`native_form`) and hand
+them to the core.
 
 Why a subclass, rather than a hook this face would install into the core at import: the
 core stays whole on its own (importable, typed and tested without this face), nothing is
