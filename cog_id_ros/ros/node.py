@@ -151,15 +151,17 @@ class CogIdNode(ReadOnlyNode):
         self._threads_started = True
 
     def stopped_threads(self) -> list[str]:
-        """'<thread>: <why>' of every thread of the node that ended although the node did
-        not stop it (a bug: none may end silently; /diagnostics says ERROR, and the process
-        exits with status 1)."""
+        """'<thread>: <why>' of every thread of the node that ended by itself: with an
+        exception, or while the context was still ok and the node had not stopped it (a
+        bug: none may end silently; /diagnostics says ERROR, and the process exits with
+        status 1). The setpoint thread ends when the context is shut down (a stop signal),
+        maybe before the node stops it: that is not a thread that stopped."""
         if not getattr(self, '_threads_started', False):
             return []
         out = []
         for name, thread in (('setpoint thread', self.setpoint_loop),
                              ('trajectory worker', self.trajectory_worker)):
-            if not thread.running:
+            if thread.ended_by_itself:
                 failure = thread.failure
                 out.append(f'{name}: ' + (f'{type(failure).__name__}: {failure}'
                                           if failure is not None else 'ended'))

@@ -66,6 +66,13 @@ class TrajectoryWorker:
     def running(self) -> bool:
         return self._thread.is_alive()
 
+    @property
+    def ended_by_itself(self) -> bool:
+        """Whether the thread ended although :meth:`stop` was not called (an exception: a
+        bug)."""
+        return self._thread.ident is not None and not self._thread.is_alive() \
+            and (self.failure is not None or not self._stopping)
+
     def answer_bound(self, points: int | None) -> float:
         """s the process has to answer a trajectory of ``points`` points (None: unknown)."""
         return self.timeout + self.SECONDS_PER_POINT * (points or 0)
