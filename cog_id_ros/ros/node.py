@@ -99,7 +99,10 @@ class CogIdNode(ReadOnlyNode):
         self._joint_states_countdown = 1      # served setpoints until the next joint_states
         with self.qos_overrides_honoured(overrides):
             self._create_topics()
-        self.trajectory_worker = TrajectoryWorker(config, self._trajectory_done)
+        # the trajectory process builds the kernels the node's solver uses: never again
+        # the ones the node gave up on ('auto' that fell back to 'python': a hung compiler)
+        self.trajectory_worker = TrajectoryWorker(config, self._trajectory_done,
+                                                  backend=self._trajectory_backend())
         self.create_timer(config.diagnostics_period, self.publish_diagnostics)
         if config.setpoint_timeout > 0.0:
             self.create_timer(min(config.setpoint_timeout / 4.0, 0.25), self.check_timeout)
@@ -137,6 +140,13 @@ class CogIdNode(ReadOnlyNode):
         self.create_subscription(JointTrajectory, TOPICS['joint_trajectory'].name,
                                  self.on_trajectory, control_qos(),
                                  qos_overriding_options=qos_options(), raw=True)
+
+    def _trajectory_backend(self) -> str:
+        """The backend of the trajectory process: the node's solver's, except that compiled
+        kernels the node has (from its cache) are asked for as the parameter asked (with
+        'auto', a process that cannot load them falls back to the Python ones)."""
+        used = self.solver.backend
+        return self.config.backend if used == 'native' else used
 
     def _ros_now_ns(self) -> int:
         """The node's clock (ROS time: /clock with use_sim_time) in integer ns."""

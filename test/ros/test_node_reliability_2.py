@@ -360,3 +360,121 @@ def test_a_stop_signal_during_a_setpoint_stream_exits_0(ros_process, rclpy_conte
 
 def _stamp(msg):
     return msg.header.stamp.sec * NS + msg.header.stamp.nanosec
+
+
+def _ready_trajectory_process(proc, probe):
+    """The trajectory processes of node ``proc`` once one answered a 6-point trajectory (so
+    it is past its start-up)."""
+    q = np.full((6, 1), 1.4)
+    answered = len(probe.effort_trajectories)
+    probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
+    assert wait_until(lambda: len(probe.effort_trajectories) > answered, timeout=90), \
+        proc.output
+    pids = trajectory_processes(proc.proc.pid)
+    assert pids, 'no trajectory process'
+    return pids
+
+
+def test_a_long_trajectory_to_a_stopped_process_is_answered_within_its_bound(ros_process,
+                                                                              probe_for):
+    """Reliability 2, adversarial check: a 20,000-point trajectory (about 1 MB) sent to a
+    stopped trajectory process hung the trajectory path for good: only the answer was
+    waited for with a bound, and the send itself blocked for ever once the pipe was full
+    (trajectory_in_progress stayed true, later trajectories were never answered). The
+    whole exchange is now bounded: 0.1 s + 1 ms a point = 20.1 s here."""
+    proc = start(ros_process, '/stopbig', '-p', 'trajectory_timeout:=0.1')
+    probe = probe_for('/stopbig')
+    stopped = _ready_trajectory_process(proc, probe)
+    try:
+        for pid in stopped:
+            os.kill(pid, signal.SIGSTOP)
+        began = time.monotonic()
+        probe.trajectories.publish(long_trajectory(20_000))
+        kv = wait_values(probe, lambda kv: kv['trajectories_rejected.solver'] == '1',
+                         timeout=60)
+        took = time.monotonic() - began
+        assert kv['trajectories_rejected.solver'] == '1', (kv, proc.output)
+        assert kv['trajectory_in_progress'] == 'false', kv
+        assert took < 20.1 + 10, f'answered after {took:.1f} s'
+        assert proc.wait_for_output('did not answer the trajectory within 20.1 s', 10), \
+            proc.output
+        assert wait_until(lambda: all(process_state(pid) in ('', 'Z') for pid in stopped),
+                          10), 'the stopped process lives on'
+    finally:
+        for pid in stopped:     # never left behind stopped, whatever happened
+            if process_state(pid) not in ('', 'Z'):
+                os.kill(pid, signal.SIGKILL)
+    q = np.full((3, 1), 1.4)
+    probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
+    assert wait_until(lambda: len(probe.effort_trajectories) == 2, timeout=90), proc.output
+    assert proc.stop() == 0, proc.output
+
+
+def test_sigint_with_an_idle_stopped_trajectory_process_is_quick(ros_process, probe_for):
+    """Reliability 2, adversarial check: SIGINT with an idle trajectory process stopped
+    (SIGSTOP) took 5 s: the node waited 5 s for it to end on EOF before it killed it. A
+    trajectory process ends within milliseconds of reading EOF; the node now waits 0.5 s."""
+    proc = start(ros_process, '/idlestop')
+    probe = probe_for('/idlestop')
+    stopped = _ready_trajectory_process(proc, probe)
+    try:
+        for pid in stopped:
+            os.kill(pid, signal.SIGSTOP)
+        began = time.monotonic()
+        assert proc.stop(timeout=20) == 0, proc.output
+        took = time.monotonic() - began
+        assert took < 3.0, f'{took:.1f} s to stop'
+        assert wait_until(lambda: all(process_state(pid) in ('', 'Z') for pid in stopped), 10)
+    finally:
+        for pid in stopped:
+            if process_state(pid) not in ('', 'Z'):
+                os.kill(pid, signal.SIGKILL)
+
+
+def test_a_stopped_trajectory_process_dies_with_a_killed_node(ros_process, probe_for):
+    """Reliability 2, adversarial check: after kill -9 of the node, its trajectory process,
+    stopped with SIGSTOP, stayed for ever (state T). It now gets SIGKILL when the node dies
+    (Linux: prctl PR_SET_PDEATHSIG), which ends a stopped process too."""
+    proc = start(ros_process, '/kill9')
+    probe = probe_for('/kill9')
+    stopped = _ready_trajectory_process(proc, probe)
+    try:
+        for pid in stopped:
+            os.kill(pid, signal.SIGSTOP)
+        assert wait_until(lambda: all(process_state(pid) == 'T' for pid in stopped), 10)
+        proc.proc.kill()
+        proc.proc.wait(timeout=10)
+        assert wait_until(lambda: all(process_state(pid) in ('', 'Z') for pid in stopped),
+                          10), [process_state(pid) for pid in stopped]
+    finally:
+        for pid in stopped:
+            if process_state(pid) not in ('', 'Z'):
+                os.kill(pid, signal.SIGKILL)
+    proc.stop()
+
+
+def _failing_compiler(tmp_path):
+    calls = tmp_path / 'compiler.calls'
+    failing = tmp_path / 'failing-cc'
+    failing.write_text(f'#!/bin/sh\necho $$ >> {calls}\nexit 1\n')
+    failing.chmod(0o755)
+    return failing, calls
+
+
+def test_the_trajectory_process_uses_the_backend_the_node_fell_back_to(ros_process, probe_for,
+                                                                       tmp_path, ros_env):
+    """Reliability 2, adversarial check: with a hung C compiler the trajectory process ran
+    the same compiler again for another 120 s: it was given the parameter ('auto'), not
+    the backend the node ended up with (failed builds are remembered per process). With a
+    compiler that fails at once: it ran twice, and the fallback was logged twice. The
+    trajectory process now gets the node's backend ('python' here)."""
+    failing, calls = _failing_compiler(tmp_path)
+    env = dict(ros_env, CC=str(failing), COG_ID_ROS_CACHE=str(tmp_path / 'cache'))
+    proc = start(ros_process, '/fellback', env=env)
+    probe = probe_for('/fellback')
+    _ready_trajectory_process(proc, probe)
+    kv = wait_values(probe, lambda kv: 'backend' in kv)
+    assert kv['backend'] == 'python', kv
+    assert len(calls.read_text().split()) == 1, f'the compiler ran {calls.read_text()}'
+    assert proc.output.count('compiled kernels unavailable') == 1, proc.output
+    assert proc.stop() == 0, proc.output
