@@ -35,7 +35,14 @@ from ..description import Mechanism
 from .command_line import urdf_base_dir
 from .config import NodeConfig, start_up_summary
 from .conversions import EffortMessages, Rejected, clip_efforts, rejection, trajectory_point_count
-from .diagnostics import Counts, DiagnosticsPublisher, Report, ThrottledWarnings, guarded
+from .diagnostics import (
+    Counts,
+    DiagnosticsPublisher,
+    PythonLogsToRos,
+    Report,
+    ThrottledWarnings,
+    guarded,
+)
 from .modes import FeedForward, Mode
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
 from .read_only_node import ReadOnlyNode
@@ -59,11 +66,20 @@ class CogIdNode(ReadOnlyNode):
         and build no rclpy object (loading the mechanism, compiling its kernels), in which
         main() lets a stop signal raise (stop_signals.DeferredStop.interruptible)."""
         super().__init__(NODE_NAME, **kwargs)
+        # the package's Python log lines (the core's: e.g. a fallback to the Python kernels
+        # while the solver is built below) in ROS's format, under this node's name
+        self._python_logs: PythonLogsToRos | None = PythonLogsToRos.attach(self.get_logger())
         try:
             self._build(command_line, interruptible)
         except BaseException:
             self.destroy_node()     # no half-built node left to rclpy's clean-up
             raise
+
+    def destroy_node(self) -> None:
+        if self._python_logs is not None:
+            self._python_logs.detach()
+            self._python_logs = None
+        super().destroy_node()
 
     def _build(self, command_line: Sequence[str] | None,
                interruptible: Callable[[], ContextManager]) -> None:
@@ -101,8 +117,9 @@ class CogIdNode(ReadOnlyNode):
             self._create_topics()
         # the trajectory process builds the kernels the node's solver uses: never again
         # the ones the node gave up on ('auto' that fell back to 'python': a hung compiler)
-        self.trajectory_worker = TrajectoryWorker(config, self._trajectory_done,
-                                                  backend=self._trajectory_backend())
+        self.trajectory_worker = TrajectoryWorker(
+            config, self._trajectory_done, backend=self._trajectory_backend(),
+            logger_name=self.get_logger().get_child('trajectories').name)
         self.create_timer(config.diagnostics_period, self.publish_diagnostics)
         if config.setpoint_timeout > 0.0:
             self.create_timer(min(config.setpoint_timeout / 4.0, 0.25), self.check_timeout)

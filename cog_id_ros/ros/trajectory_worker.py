@@ -16,10 +16,13 @@ import threading
 import time
 from typing import Any, Callable
 
+import rclpy.logging
+
 from ..core import InverseDynamics
 from ..description import Mechanism
 from .config import NodeConfig
 from .conversions import JointSelector, Rejected, solve_trajectory_message, trajectory_point_count
+from .diagnostics import PythonLogsToRos
 
 
 class TrajectoryWorker:
@@ -60,10 +63,13 @@ class TrajectoryWorker:
     KILLED_BOUND = 5.0
 
     def __init__(self, config: NodeConfig, on_done: Callable[[tuple], None],
-                 backend: str | None = None) -> None:
-        """``backend``: what the node's solver uses (None: the parameter's)."""
+                 backend: str | None = None, logger_name: str | None = None) -> None:
+        """``backend``: what the node's solver uses (None: the parameter's); ``logger_name``:
+        the rclpy logger the process hands the package's Python log records to (None: they
+        stay Python's)."""
         self.config = config if backend is None else config.with_backend(backend)
         self.on_done = on_done
+        self.logger_name = logger_name
         self.timeout = config.trajectory_timeout
         self._cond = threading.Condition()
         # _next is solved next, never replaced (it came while nothing was solved or
@@ -136,7 +142,7 @@ class TrajectoryWorker:
                 raise EOFError('the node is stopping: no new trajectory process')
             parent, child = context.Pipe()
             process = context.Process(target=trajectory_process,
-                                      args=(child, self.config, os.getpid()),
+                                      args=(child, self.config, os.getpid(), self.logger_name),
                                       name='cog_id_node trajectories', daemon=True)
             # Started with SIGINT blocked, which the new process inherits, so that Ctrl-C in
             # a terminal (it reaches the whole process group) never interrupts it, not even
@@ -270,7 +276,8 @@ class _Sender(threading.Thread):
             self._raw = None
 
 
-def trajectory_process(conn: Any, config: NodeConfig, parent: int | None = None) -> None:
+def trajectory_process(conn: Any, config: NodeConfig, parent: int | None = None,
+                       logger_name: str | None = None) -> None:
     """Main function of the node's trajectory process (``multiprocessing``, spawn).
 
     ``config``: the node's (its backend: the one the node's solver uses). Reads serialized
@@ -279,11 +286,15 @@ def trajectory_process(conn: Any, config: NodeConfig, parent: int | None = None)
     answers each with ('ok', serialized effort_trajectory, clipped, points), ('rejected',
     reason, text, points) or ('internal', text). Dies with the node ``parent`` (its pid:
     :func:`die_with_parent`). Ignores SIGINT: Ctrl-C in a terminal reaches the whole process
-    group, and the node ends this process itself.
+    group, and the node ends this process itself. The package's Python log records go to
+    the rclpy logger ``logger_name`` (ROS's log format; rcutils logs without rclpy.init),
+    if given.
     """
     if parent is not None:
         die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if logger_name is not None:
+        PythonLogsToRos.attach(rclpy.logging.get_logger(logger_name))
     solver = InverseDynamics(Mechanism.from_parameters(config.mechanism),
                              backend=config.backend)
     selector = JointSelector(config.active_joints)

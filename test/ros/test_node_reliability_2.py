@@ -478,3 +478,29 @@ def test_the_trajectory_process_uses_the_backend_the_node_fell_back_to(ros_proce
     assert len(calls.read_text().split()) == 1, f'the compiler ran {calls.read_text()}'
     assert proc.output.count('compiled kernels unavailable') == 1, proc.output
     assert proc.stop() == 0, proc.output
+
+
+def test_the_packages_python_log_lines_are_in_ros_log_format(ros_process, probe_for, tmp_path,
+                                                             ros_env):
+    """Reliability 2, adversarial check: the core's Python logging lines (logger
+    'cog_id_ros': "compiled kernels unavailable ...", "not loaded from the cache ...") came
+    out of the node and of its trajectory process as bare lines, not in ROS's log format.
+    They now go to the node's rclpy logger (the trajectory process's: a child of it)."""
+    failing, _ = _failing_compiler(tmp_path)
+    shared = tmp_path / 'shared-cache'
+    shared.mkdir()
+    shared.chmod(0o777)         # not private: both processes say so (and build elsewhere)
+    for name, env in (('fallback_log', dict(ros_env, CC=str(failing),
+                                            COG_ID_ROS_CACHE=str(tmp_path / 'cache'))),
+                      ('shared_log', dict(ros_env, COG_ID_ROS_CACHE=str(shared)))):
+        proc = start(ros_process, f'/{name}', env=env)
+        probe = probe_for(f'/{name}')
+        _ready_trajectory_process(proc, probe)
+        assert proc.stop() == 0, proc.output
+        lines = [line for line in proc.output.splitlines() if 'cog_id_ros: ' in line]
+        assert lines, proc.output
+        for line in lines:
+            assert line.startswith('[WARN] [') and f'[{name}.cog_id_node' in line, line
+        if name == 'shared_log':      # one from the node, one from its trajectory process
+            assert sorted(line.split(']')[2] for line in lines) == \
+                [f' [{name}.cog_id_node', f' [{name}.cog_id_node.trajectories'], lines
