@@ -8,9 +8,9 @@ Run::
 import functools
 import sys
 
-from .command_line import node_arguments, wants_help
+from .command_line import no_parameters_problem, node_arguments, wants_help
 from .node import NODE_NAME, CogIdNode
-from .startup import run
+from .startup import cannot_start, run
 
 USAGE = f"""usage: {NODE_NAME} [-h] --ros-args --params-file FILE [-p NAME:=VALUE ...] [-r OLD:=NEW ...]
 
@@ -48,6 +48,9 @@ def main(args: list[str] | None = None) -> int:
     if wants_help(argv):
         print(USAGE, end='')
         return 0
+    problem = no_parameters_problem(argv, NODE_NAME)
+    if problem:
+        return cannot_start(NODE_NAME, problem)
     return run(NODE_NAME, functools.partial(CogIdNode, command_line=argv), args)
 
 

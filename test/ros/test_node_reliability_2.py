@@ -504,3 +504,64 @@ def test_the_packages_python_log_lines_are_in_ros_log_format(ros_process, probe_
         if name == 'shared_log':      # one from the node, one from its trajectory process
             assert sorted(line.split(']')[2] for line in lines) == \
                 [f' [{name}.cog_id_node', f' [{name}.cog_id_node.trajectories'], lines
+
+
+def test_no_mechanism_parameters_says_how_to_give_them(ros_env):
+    """Reliability 2, adversarial check: `cog_id_node --params-file x.yaml` (--ros-args
+    forgotten) and a plain `cog_id_node` both said "cannot start: mechanism.links:
+    missing"; now they say how to give the parameters, and what was given instead."""
+    repo = str(pathlib.Path(__file__).resolve().parents[2])
+    cases = {(): None,
+             ('--params-file', CONFIG_A): f"got '--params-file {CONFIG_A}'",
+             ('--params-file', CONFIG_A, '--ros-args', '-r', '__ns:=/forgot'):
+                 f"got '--params-file {CONFIG_A}'"}
+    for args, got in cases.items():
+        result = subprocess.run([sys.executable, '-m', 'cog_id_ros.node', *args], env=ros_env,
+                                cwd=repo, stdin=subprocess.DEVNULL, capture_output=True,
+                                text=True, timeout=60)
+        assert result.returncode == 2, (args, result.stderr)
+        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1, (args, result.stderr)
+        line = lines[0]
+        assert line.startswith('cog_id_node: cannot start: no mechanism parameters given: '
+                               'run cog_id_node --ros-args --params-file FILE'), line
+        assert 'mechanism.links' not in line, line
+        if got is None:
+            assert 'got' not in line, line
+        else:
+            assert 'arguments before --ros-args are not ROS arguments' in line, line
+            assert line.endswith(got), line
+
+
+def test_a_change_of_an_unknown_parameter_is_refused_naming_it(ros_process, probe_for):
+    """Reliability 2, adversarial check: SetParameters on a name the node does not have
+    was refused with rclpy's "Invalid access to undeclared parameter(s): []", and one named
+    '' with a reason starting ": cog_id_node reads..."; now each reason names the parameter
+    and says it is not one of the node's (a declared one: read-only, as before)."""
+    from rcl_interfaces.srv import SetParametersAtomically
+
+    start(ros_process, '/setunknown')
+    probe = probe_for('/setunknown')
+
+    def param(name):
+        return ParameterMsg(name=name, value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=2.0))
+
+    result = call(probe.node, SetParameters, '/setunknown/cog_id_node/set_parameters',
+                  SetParameters.Request(parameters=[param('no_such_parameter'), param(''),
+                                                    param('setpoint_timeout')]))
+    reasons = [r.reason for r in result.results]
+    assert not any(r.successful for r in result.results), reasons
+    assert reasons[0] == 'no_such_parameter: not a parameter of cog_id_node', reasons
+    assert reasons[1] == "'': not a parameter of cog_id_node", reasons
+    assert reasons[2].startswith('setpoint_timeout: cog_id_node reads its parameters once'), \
+        reasons
+    result = call(probe.node, SetParametersAtomically,
+                  '/setunknown/cog_id_node/set_parameters_atomically',
+                  SetParametersAtomically.Request(parameters=[param('setpoint_timeout'),
+                                                              param('no_such_parameter')]))
+    assert not result.result.successful
+    assert result.result.reason.startswith('setpoint_timeout: cog_id_node reads'), \
+        result.result.reason
+    assert result.result.reason.endswith('; no_such_parameter: not a parameter of cog_id_node'), \
+        result.result.reason
