@@ -50,10 +50,19 @@ def main(args: list[str] | None = None) -> int:
     signal while Python imports and the node starts stops it cleanly too (exit status 0;
     here until rclpy is initialised, then :mod:`.startup`). A thread of the node that
     ended by itself makes the exit status 1.
+
+    The process's main: it returns with SIGINT and SIGTERM ignored. The node is stopped by
+    then, and what is left is Python's own exit (a few hundred ms: modules, DDS), during
+    which Python has put back the default action of every signal it handled, so a second
+    stop signal there killed the process (exit status -15 after a clean stop).
     """
     for signum in STOP_SIGNALS:     # first: Python is still to import numpy, rclpy, ...
         signal.signal(signum, _exit_at_once)
-    return _main(args)
+    try:
+        return _main(args)
+    finally:
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
 
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)

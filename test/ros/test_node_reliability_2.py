@@ -598,3 +598,39 @@ def test_a_stop_signal_while_the_node_imports_exits_0(ros_env):
             what = f'{sig.name} at {wait:.3f} s'
             assert proc.returncode == 0, f'{what}: {proc.returncode}\n{output}'
             assert 'Traceback' not in output, f'{what}:\n{output}'
+
+
+def test_a_second_stop_signal_during_clean_up_exits_0(ros_process, probe_for):
+    """Reliability 2, adversarial check: SIGINT then SIGTERM 50 ms later exited -15: the
+    second signal came while Python finalised the process (the ~0.1 s after the node's
+    clean-up: modules, DDS), when Python has put back the default action of every signal
+    it handled. A second stop signal is now ignored (the clean-up is bounded). It is sent
+    here at the worst moment: once the node no longer catches it (/proc/<pid>/status)."""
+    pairs = [(signal.SIGINT, signal.SIGTERM), (signal.SIGTERM, signal.SIGINT),
+             (signal.SIGINT, signal.SIGINT)]
+    for first, second in pairs:
+        proc = start(ros_process, '/twice')
+        probe_for('/twice').status_after(time.monotonic())     # up: it spins
+        pid = proc.proc.pid
+        proc.proc.send_signal(first)
+        assert wait_until(lambda: proc.proc.poll() is not None
+                          or not _catches(pid, second), 20), proc.output
+        if proc.proc.poll() is None:
+            proc.proc.send_signal(second)
+        try:
+            proc.proc.wait(timeout=20)
+        finally:
+            code = proc.stop()
+        assert code == 0, f'{first.name}, then {second.name}: {code}\n{proc.output}'
+
+
+def _catches(pid, sig):
+    """Whether process ``pid`` has a handler for ``sig`` (SigCgt of /proc/<pid>/status);
+    True once it is gone."""
+    try:
+        for line in pathlib.Path(f'/proc/{pid}/status').read_text().splitlines():
+            if line.startswith('SigCgt:'):
+                return bool(int(line.split()[1], 16) >> (sig - 1) & 1)
+    except OSError:
+        pass
+    return True
