@@ -17,6 +17,8 @@ import sys
 #: the console script (setup.py); the node has the same name (node.NODE_NAME)
 PROGRAM = 'cog_id_node'
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
 USAGE = f"""usage: {PROGRAM} [-h] --ros-args --params-file FILE [-p NAME:=VALUE ...] [-r OLD:=NEW ...]
 
 Closed-link inverse dynamics as a ROS 2 node: JointState setpoints in on joint_setpoint,
@@ -63,9 +65,6 @@ def main(args: list[str] | None = None) -> int:
     finally:
         for signum in STOP_SIGNALS:
             signal.signal(signum, signal.SIG_IGN)
-
-
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def _exit_at_once(signum: int, frame: object) -> None:

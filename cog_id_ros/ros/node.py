@@ -76,9 +76,9 @@ class CogIdNode(ReadOnlyNode):
             raise
 
     def destroy_node(self) -> None:
-        if self._python_logs is not None:
-            self._python_logs.detach()
-            self._python_logs = None
+        python_logs, self._python_logs = getattr(self, '_python_logs', None), None
+        if python_logs is not None:
+            python_logs.detach()
         super().destroy_node()
 
     def _build(self, command_line: Sequence[str] | None,

@@ -44,9 +44,9 @@ class TrajectoryWorker:
     answer) and gives an idle one ``EOF_GRACE`` s to end by itself (multiprocessing's exit
     handler would wait for it without a bound).
 
-    The process gets the backend the node's solver uses (``backend``, e.g. 'python' after
-    the node fell back to it), not the parameter: it never builds again what the node gave
-    up on. It dies with the node (:func:`die_with_parent`).
+    The process computes with ``backend`` when given: the node gives the one its solver
+    ended up with ('python' after a fallback from 'auto'), so the process never builds
+    again what the node gave up on. It dies with the node (:func:`die_with_parent`).
     """
 
     #: s a new trajectory process may take to load the mechanism and its kernels (a cold
