@@ -1,7 +1,9 @@
 """cog_id_node under what a newcomer and an adversary hit (the second reliability issue:
 "a node that stops serving, a cache that trusts anyone, demos that hide losses").
 
-Each test names its item ("Reliability 2, item N") and fails on the code before the fix.
+Each test names its item ("Reliability 2, item N") and fails on the code before the fix;
+so does each test of the section that follows them, on what an adversarial tester then
+found in those fixes ("Reliability 2, adversarial check").
 Nodes run as subprocesses of this checkout (``python -m cog_id_ros.node``) in namespaces
 of their own; a probe node in this process talks to them over DDS. Waits are generous
 upper bounds, never reached when things work.
