@@ -1,7 +1,7 @@
 """cog_id_ros.ros: the ROS 2 face (needs rclpy): the node ``cog_id_node`` and its parts.
 
   node.py              the node's wiring: topics, timers, the callback that serves a setpoint
-  main.py              ``cog_id_node``'s main (usage, start-up)
+  main.py              ``cog_id_node``'s main (stop signals while it imports, usage, start-up)
   config.py            NodeConfig: what the node reads at start-up, frozen (node and worker)
   parameters.py        the node's parameters: type, default, bounds, description (one table)
   topics.py            the node's topics: type, direction, QoS, meaning (one table)

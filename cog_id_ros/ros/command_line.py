@@ -1,7 +1,9 @@
 """The command line of the package's nodes: ``--params-file`` checks and rcl's messages.
 
 rcl refuses a params file with a message that names a line, not the parameter, and logs a
-second line of its own. These helpers read the files first (:func:`params_file_problem`),
+second line of its own. These helpers say how to give parameters when none are
+(:func:`no_parameters_problem`: a ``--params-file`` before ``--ros-args`` is not one), read
+the files first (:func:`params_file_problem`),
 turn what rcl still refuses into one line that names the parameter (:func:`rcl_message`,
 with rcl's own log line held back meanwhile: :class:`StderrHeld`), and say which file a
 relative ``mechanism.urdf_file`` is relative to (:func:`urdf_base_dir`).
@@ -32,6 +34,38 @@ def wants_help(argv: Sequence[str]) -> bool:
     """``-h`` or ``--help`` before ``--ros-args``."""
     own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
     return '-h' in own or '--help' in own
+
+
+def split_ros_arguments(argv: Sequence[str]) -> tuple[list[str], list[str]]:
+    """(ROS arguments, the others): the ROS ones are those after a ``--ros-args`` up to
+    the next ``--`` or the end (rcl's rule; there may be several such sections)."""
+    ros, other, inside = [], [], False
+    for arg in argv:
+        if arg == '--ros-args':
+            inside = True
+        elif inside and arg == '--':
+            inside = False
+        else:
+            (ros if inside else other).append(arg)
+    return ros, other
+
+
+def no_parameters_problem(argv: Sequence[str], program: str) -> str | None:
+    """A sentence saying how to give the node its parameters when the command line gives
+    none (no ``--params-file``, no ``-p`` among its ROS arguments), or None.
+
+    rcl reads only ROS arguments: a ``--params-file`` before ``--ros-args`` is ignored, and
+    the node would stop at the first mechanism parameter it misses (``mechanism.links:
+    missing``), which says nothing about the cause.
+    """
+    ros, other = split_ros_arguments(argv)
+    if any(arg in ('--params-file', '-p', '--param') for arg in ros):
+        return None
+    text = f'no mechanism parameters given: run {program} --ros-args --params-file FILE'
+    if other:
+        text += ('; arguments before --ros-args are not ROS arguments: '
+                 f"got '{' '.join(other)}'")
+    return text
 
 
 def params_file_problem(argv: Sequence[str]) -> str | None:

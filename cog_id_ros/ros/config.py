@@ -53,6 +53,11 @@ class NodeConfig:
                 return values[name]
         raise AttributeError(f'{type(self).__name__} has no attribute {name!r}')
 
+    def with_backend(self, backend: str) -> 'NodeConfig':
+        """The same configuration with ``backend`` (e.g. the one the node's solver resolved
+        'auto' to)."""
+        return dataclasses.replace(self, values={**self.values, 'backend': backend})
+
     @property
     def limited(self) -> bool:
         """Whether any active joint has a finite effort limit."""

@@ -7,10 +7,12 @@ package uses to report (the guard of its callbacks, throttled warnings, the publ
   its threads, with the closure health of the last served pose;
 * reusable: :func:`guarded` (no exception of a callback ends the node),
   :class:`ThrottledWarnings`, :class:`DiagnosticsPublisher` (``/diagnostics`` and the
-  warning about other nodes with the node's name).
+  warning about other nodes with the node's name), :class:`PythonLogsToRos` (the
+  package's Python log records in ROS's log format).
 """
 import collections
 import functools
+import logging
 import math
 import time
 from typing import Any, Callable
@@ -98,6 +100,52 @@ class ThrottledWarnings:
             self.logger.error(text + more)
         else:
             self.logger.warning(text + more)
+
+
+class PythonLogsToRos(logging.Handler):
+    """A handler of Python's logging that hands each record to an rclpy logger at its
+    level: the lines the package logs with Python's ``logging`` (logger ``cog_id_ros``: the
+    core's "compiled kernels unavailable ...", "not loaded from the cache ...") come out
+    in ROS's log format, under the node's name, like the node's own.
+
+    :meth:`attach` adds one to the package's logger, :meth:`detach` removes it (a node
+    does so for its lifetime). Which records are emitted stays Python's choice (the logger's
+    level: WARNING and above unless configured).
+    """
+
+    PACKAGE_LOGGER = 'cog_id_ros'
+
+    def __init__(self, ros_logger: Any) -> None:
+        super().__init__()
+        self.ros_logger = ros_logger
+
+    @classmethod
+    def attach(cls, ros_logger: Any) -> 'PythonLogsToRos':
+        handler = cls(ros_logger)
+        logging.getLogger(cls.PACKAGE_LOGGER).addHandler(handler)
+        return handler
+
+    def detach(self) -> None:
+        logging.getLogger(self.PACKAGE_LOGGER).removeHandler(self)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = self.format(record)
+            level = record.levelno
+            # one call site per severity: rclpy's logger remembers the severity of each call
+            # site and raises ValueError when one site logs at another
+            if level >= logging.CRITICAL:
+                self.ros_logger.fatal(text)
+            elif level >= logging.ERROR:
+                self.ros_logger.error(text)
+            elif level >= logging.WARNING:
+                self.ros_logger.warning(text)
+            elif level >= logging.INFO:
+                self.ros_logger.info(text)
+            else:
+                self.ros_logger.debug(text)
+        except Exception:   # noqa: BLE001 (logging's own way: a line, never an exception)
+            self.handleError(record)
 
 
 class Counts:

@@ -4,15 +4,22 @@ Run::
 
     cog_id_node --ros-args --params-file config/paper_four_bar_a.yaml
     python -m cog_id_ros.node --ros-args -r __ns:=/arm --params-file config/paper_four_bar_b.yaml
+
+This module imports nothing heavy (the package's ``__init__`` neither): :func:`main` takes
+charge of SIGINT and SIGTERM first, then imports numpy, rclpy and the node (about a second
+on a busy machine), so that a stop signal at any moment ends the process with exit status 0
+and no traceback.
 """
-import functools
+import os
+import signal
 import sys
 
-from .command_line import node_arguments, wants_help
-from .node import NODE_NAME, CogIdNode
-from .startup import run
+#: the console script (setup.py); the node has the same name (node.NODE_NAME)
+PROGRAM = 'cog_id_node'
 
-USAGE = f"""usage: {NODE_NAME} [-h] --ros-args --params-file FILE [-p NAME:=VALUE ...] [-r OLD:=NEW ...]
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+USAGE = f"""usage: {PROGRAM} [-h] --ros-args --params-file FILE [-p NAME:=VALUE ...] [-r OLD:=NEW ...]
 
 Closed-link inverse dynamics as a ROS 2 node: JointState setpoints in on joint_setpoint,
 actuator efforts out on effort_command and joint_effort (one per accepted setpoint);
@@ -24,9 +31,9 @@ The mechanism (mechanism.*, links.*, joints.*; or a URDF: robot_description or
 mechanism.urdf_file, with loop_closures.*) and the node's own parameters come from a
 ROS 2 parameter file, e.g.
 
-    {NODE_NAME} --ros-args --params-file config/paper_four_bar_a.yaml
-    {NODE_NAME} --ros-args --params-file config/paper_four_bar_b.yaml -r __ns:=/arm
-    {NODE_NAME} --ros-args --params-file config/crank_rocker_urdf.yaml
+    {PROGRAM} --ros-args --params-file config/paper_four_bar_a.yaml
+    {PROGRAM} --ros-args --params-file config/paper_four_bar_b.yaml -r __ns:=/arm
+    {PROGRAM} --ros-args --params-file config/crank_rocker_urdf.yaml
 
 A parameter that cannot be honoured ends the node with exit status 2 and one line naming
 it. Ctrl-C or SIGTERM stop it (exit status 0).
@@ -39,15 +46,54 @@ docs/parameter_file.md (the mechanism parameter file) of the cog_id_ros package.
 def main(args: list[str] | None = None) -> int:
     """Start the node and spin until Ctrl-C or SIGTERM (exit status 0).
 
-    ``-h``/``--help`` (before ``--ros-args``): the usage, exit status 0. A parameter that
-    cannot be honoured, or a params file rcl cannot parse: exit status 2 and one line
-    naming it. A stop signal during start-up stops the node cleanly too (exit status 0;
-    :mod:`.startup`). A thread of the node that ended by itself makes the exit status 1.
+    ``-h``/``--help`` (before ``--ros-args``): the usage, exit status 0. No parameters on
+    the command line, a parameter that cannot be honoured, or a params file rcl cannot
+    parse: exit status 2 and one line saying what to do or naming the parameter. A stop
+    signal while Python imports and the node starts stops it cleanly too (exit status 0;
+    here until rclpy is initialised, then :mod:`.startup`). A thread of the node that
+    ended by itself makes the exit status 1.
+
+    The process's main: it returns with SIGINT and SIGTERM ignored. The node is stopped by
+    then, and what is left is Python's own exit (a few hundred ms: modules, DDS), during
+    which Python has put back the default action of every signal it handled, so a second
+    stop signal there killed the process (exit status -15 after a clean stop).
     """
+    for signum in STOP_SIGNALS:     # first: Python is still to import numpy, rclpy, ...
+        signal.signal(signum, _exit_at_once)
+    try:
+        return _main(args)
+    finally:
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
+
+
+def _exit_at_once(signum: int, frame: object) -> None:
+    """A stop signal before rclpy is initialised (Python imports numpy, rclpy, the node,
+    or reads the params files): nothing exists that needs cleaning up, so exit status 0 at
+    once, without the KeyboardInterrupt traceback of Python's own handler or SIGTERM's
+    -15. :class:`.stop_signals.DeferredStop` takes over before rclpy.init."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:   # noqa: BLE001 (e.g. interrupted in a write to it: exit anyway)
+            pass
+    os._exit(0)
+
+
+def _main(args: list[str] | None) -> int:
+    import functools
+
+    from .command_line import no_parameters_problem, node_arguments, wants_help
+    from .node import NODE_NAME, CogIdNode
+    from .startup import cannot_start, run
+
     argv = node_arguments(args)
     if wants_help(argv):
         print(USAGE, end='')
         return 0
+    problem = no_parameters_problem(argv, PROGRAM)
+    if problem:
+        return cannot_start(NODE_NAME, problem)
     return run(NODE_NAME, functools.partial(CogIdNode, command_line=argv), args)
 
 

@@ -35,7 +35,14 @@ from ..description import Mechanism
 from .command_line import urdf_base_dir
 from .config import NodeConfig, start_up_summary
 from .conversions import EffortMessages, Rejected, clip_efforts, rejection, trajectory_point_count
-from .diagnostics import Counts, DiagnosticsPublisher, Report, ThrottledWarnings, guarded
+from .diagnostics import (
+    Counts,
+    DiagnosticsPublisher,
+    PythonLogsToRos,
+    Report,
+    ThrottledWarnings,
+    guarded,
+)
 from .modes import FeedForward, Mode
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
 from .read_only_node import ReadOnlyNode
@@ -59,11 +66,20 @@ class CogIdNode(ReadOnlyNode):
         and build no rclpy object (loading the mechanism, compiling its kernels), in which
         main() lets a stop signal raise (stop_signals.DeferredStop.interruptible)."""
         super().__init__(NODE_NAME, **kwargs)
+        # the package's Python log lines (the core's: e.g. a fallback to the Python kernels
+        # while the solver is built below) in ROS's format, under this node's name
+        self._python_logs: PythonLogsToRos | None = PythonLogsToRos.attach(self.get_logger())
         try:
             self._build(command_line, interruptible)
         except BaseException:
             self.destroy_node()     # no half-built node left to rclpy's clean-up
             raise
+
+    def destroy_node(self) -> None:
+        python_logs, self._python_logs = getattr(self, '_python_logs', None), None
+        if python_logs is not None:
+            python_logs.detach()
+        super().destroy_node()
 
     def _build(self, command_line: Sequence[str] | None,
                interruptible: Callable[[], ContextManager]) -> None:
@@ -99,7 +115,11 @@ class CogIdNode(ReadOnlyNode):
         self._joint_states_countdown = 1      # served setpoints until the next joint_states
         with self.qos_overrides_honoured(overrides):
             self._create_topics()
-        self.trajectory_worker = TrajectoryWorker(config, self._trajectory_done)
+        # the trajectory process builds the kernels the node's solver uses: never again
+        # the ones the node gave up on ('auto' that fell back to 'python': a hung compiler)
+        self.trajectory_worker = TrajectoryWorker(
+            config, self._trajectory_done, backend=self._trajectory_backend(),
+            logger_name=self.get_logger().get_child('trajectories').name)
         self.create_timer(config.diagnostics_period, self.publish_diagnostics)
         if config.setpoint_timeout > 0.0:
             self.create_timer(min(config.setpoint_timeout / 4.0, 0.25), self.check_timeout)
@@ -138,6 +158,13 @@ class CogIdNode(ReadOnlyNode):
                                  self.on_trajectory, control_qos(),
                                  qos_overriding_options=qos_options(), raw=True)
 
+    def _trajectory_backend(self) -> str:
+        """The backend of the trajectory process: the node's solver's, except that compiled
+        kernels the node has (from its cache) are asked for as the parameter asked (with
+        'auto', a process that cannot load them falls back to the Python ones)."""
+        used = self.solver.backend
+        return self.config.backend if used == 'native' else used
+
     def _ros_now_ns(self) -> int:
         """The node's clock (ROS time: /clock with use_sim_time) in integer ns."""
         return self.get_clock().now().nanoseconds
@@ -151,15 +178,17 @@ class CogIdNode(ReadOnlyNode):
         self._threads_started = True
 
     def stopped_threads(self) -> list[str]:
-        """'<thread>: <why>' of every thread of the node that ended although the node did
-        not stop it (a bug: none may end silently; /diagnostics says ERROR, and the process
-        exits with status 1)."""
+        """'<thread>: <why>' of every thread of the node that ended by itself: with an
+        exception, or while the context was still ok and the node had not stopped it (a
+        bug: none may end silently; /diagnostics says ERROR, and the process exits with
+        status 1). The setpoint thread ends when the context is shut down (a stop signal),
+        maybe before the node stops it: that is not a thread that stopped."""
         if not getattr(self, '_threads_started', False):
             return []
         out = []
         for name, thread in (('setpoint thread', self.setpoint_loop),
                              ('trajectory worker', self.trajectory_worker)):
-            if not thread.running:
+            if thread.ended_by_itself:
                 failure = thread.failure
                 out.append(f'{name}: ' + (f'{type(failure).__name__}: {failure}'
                                           if failure is not None else 'ended'))

@@ -268,7 +268,8 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
     NodeParameter(
         'trajectory_timeout', 'double', 10.0, 'number', unit='s', low=0.1, high=3600.0,
         description='s the trajectory process may take to answer a `joint_trajectory`, plus '
-                    '1 ms per point (10-15x what solving takes); a process that does not '
+                    '1 ms per point (10-15x what solving takes), from the moment the node '
+                    'starts writing it to the process; a process that does not take it and '
                     'answer in time (stopped, stuck) is killed and replaced, and the '
                     'trajectory is rejected (`solver`) with the reason'),
     NodeParameter(

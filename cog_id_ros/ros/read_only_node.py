@@ -5,7 +5,8 @@ values given to the node (params files, ``-p``) or from a table of
 :class:`~.parameters.NodeParameter`, each checked with an error that names it
 (MechanismConfigError: main() turns it into exit status 2 and one line); it checks the
 QoS overrides; and once the node is built (:meth:`ReadOnlyNode.refuse_changes`) it
-refuses every change of a declared parameter with the node's own reason. A subclass
+refuses every parameter change with the node's own reason, naming the parameter (read-only,
+or not a parameter of the node). A subclass
 provides ``internal_error(where, exc)``: the refusal is a guarded callback
 (:func:`.diagnostics.guarded`).
 """
@@ -33,6 +34,7 @@ class ReadOnlyNode(Node):
     def __init__(self, node_name: str, **kwargs: Any) -> None:
         self._read_only_reason = (f'{node_name} reads its parameters once at start-up; they '
                                   'are read-only (restart the node with the new value)')
+        self._unknown_reason = f'not a parameter of {node_name}'
         self._refusing = False
         super().__init__(node_name, **kwargs)
 
@@ -155,23 +157,36 @@ class ReadOnlyNode(Node):
 
     @guarded
     def _refuse_parameter_changes(self, parameters: Sequence[Parameter]) -> SetParametersResult:
-        names = ', '.join(p.name for p in parameters)
-        return SetParametersResult(successful=False,
-                                   reason=f'{names}: {self._read_only_reason}')
+        return SetParametersResult(successful=False, reason=self._refusal(parameters))
+
+    def _refusal(self, parameters: Sequence[Parameter]) -> str:
+        """The reason a change of ``parameters`` is refused, naming each: one the node
+        declared is read-only; any other name (even '') is not a parameter of the node."""
+        declared = [p.name for p in parameters if self.has_parameter(p.name)]
+        unknown = [p.name for p in parameters if not self.has_parameter(p.name)]
+        parts = []
+        if declared:
+            parts.append(f"{', '.join(map(_shown, declared))}: {self._read_only_reason}")
+        if unknown:
+            parts.append(f"{', '.join(map(_shown, unknown))}: {self._unknown_reason}")
+        return '; '.join(parts)
 
     # rclpy checks a descriptor's read_only before any callback and refuses with its own
-    # words ("Trying to set a read-only parameter"); a change of a declared parameter at
-    # runtime gets the node's reason instead (the descriptors still say read-only)
+    # words ("Trying to set a read-only parameter"), and a name the node does not have with
+    # "Invalid access to undeclared parameter(s): []": once the node is built every change
+    # is refused here instead, with the node's reason naming the parameter (the descriptors
+    # still say read-only)
     def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
-        if self._refuses(parameter_list):
+        if self._refusing:
             return [self._refuse_parameter_changes([p]) for p in parameter_list]
         return super().set_parameters(parameter_list)
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
-        if self._refuses(parameter_list):
+        if self._refusing:
             return self._refuse_parameter_changes(parameter_list)
         return super().set_parameters_atomically(parameter_list)
 
-    def _refuses(self, parameter_list: Sequence[Parameter]) -> bool:
-        """Once the node is built, a change of any parameter it declared is refused."""
-        return self._refusing and any(self.has_parameter(p.name) for p in parameter_list)
+
+def _shown(name: str) -> str:
+    """A parameter name as a reason shows it: the empty name as ''."""
+    return name if name else "''"

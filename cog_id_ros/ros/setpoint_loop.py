@@ -93,6 +93,8 @@ class SetpointLoop:
         #: the exception that ended the thread, if one did (the node reports it: a loop that
         #: dies must never do so silently)
         self.failure = None
+        #: whether the thread ended because the context was shut down (Ctrl-C, SIGTERM)
+        self._ended_at_shutdown = False
 
     def start(self):
         """Start serving. The wait set is built here, in the caller's thread (an error
@@ -128,10 +130,20 @@ class SetpointLoop:
     def running(self):
         return self._thread is not None and self._thread.is_alive()
 
+    @property
+    def ended_by_itself(self):
+        """Whether the thread ended with an exception, or while nobody stopped it and the
+        context was still ok (a bug); not when it ended because the context was shut down
+        (rclpy's signal handler does that on Ctrl-C, before the node stops its threads)."""
+        if self._thread is None or self._thread.is_alive():
+            return False
+        return self.failure is not None or not (self._stopping or self._ended_at_shutdown)
+
     def _run(self, wait_set, in_use):
         sub = self.subscription
         try:
             self._loop(wait_set, sub.handle, sub.msg_type, sub.raw, self.node.context)
+            self._ended_at_shutdown = not self.node.context.ok()
         except BaseException as exc:   # noqa: BLE001 (recorded, then the thread ends)
             self.failure = exc
             try:

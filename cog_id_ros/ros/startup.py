@@ -41,13 +41,13 @@ def run(name: str, build: Callable[..., Any], args: Sequence[str] | None = None)
     """
     problem = params_file_problem(node_arguments(args))
     if problem:
-        return _cannot_start(name, problem)
+        return cannot_start(name, problem)
     stop = stop_signals.DeferredStop()
     try:
         with StderrHeld() as held:
             rclpy.init(args=args, signal_handler_options=stop.RCLPY_OPTIONS)
     except Exception as exc:   # noqa: BLE001 (e.g. a params file rcl cannot parse)
-        return _cannot_start(name, rcl_message(exc))
+        return cannot_start(name, rcl_message(exc))
     held.replay()
     sys.setswitchinterval(SWITCH_INTERVAL)
     node = None
@@ -65,14 +65,14 @@ def run(name: str, build: Callable[..., Any], args: Sequence[str] | None = None)
         if stop.hand_over() is None:   # no stop asked for during start-up
             _spin(executor, node)
     except PARAMETER_ERRORS as exc:
-        return _cannot_start(name, one_line(exc))
+        return cannot_start(name, one_line(exc))
     except (ExternalShutdownException, stop_signals.StopRequested):
         pass   # Ctrl-C or SIGTERM: rclpy's signal handler has shut the context down, or
         # start-up was interrupted while it loaded the mechanism or compiled its kernels
     except Exception as exc:   # noqa: BLE001
         if rclpy.ok():
             if node is None:   # start-up: an error rclpy raised for something we did not check
-                return _cannot_start(name, f'{type(exc).__name__}: {one_line(exc)}')
+                return cannot_start(name, f'{type(exc).__name__}: {one_line(exc)}')
             raise
         # the signal shut the context down between two turns of spin(), whose next wait set
         # then fails on the dead context (an RCLError): a clean stop too
@@ -87,7 +87,8 @@ def run(name: str, build: Callable[..., Any], args: Sequence[str] | None = None)
     return 0
 
 
-def _cannot_start(name: str, why: str) -> int:
+def cannot_start(name: str, why: str) -> int:
+    """Print ``<name>: cannot start: <why>``; the exit status, 2."""
     print(f'{name}: cannot start: {why}', file=sys.stderr)
     return 2
 

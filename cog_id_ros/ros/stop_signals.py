@@ -1,5 +1,9 @@
 """Ctrl-C and SIGTERM while a console script builds its rclpy objects: noted, acted on after.
 
+(Before that, while Python imports numpy and rclpy, ``cog_id_node``'s main() exits 0 at
+once on a stop signal: nothing exists yet to clean up. :class:`DeferredStop` replaces that
+handler before ``rclpy.init``.)
+
 rclpy's signal handler shuts the context down the moment SIGINT or SIGTERM arrives. If that
 happens while a node or an executor is half built, its constructor fails on the dead context
 and the half-built object prints "Exception ignored in __del__" tracebacks at exit.
