@@ -24,6 +24,7 @@ shared (the tools, and some with the node):
   trajectory_io.py   reading trajectory CSV files, writing and reading efforts CSV files
   samples.py         q, qd, qdd of the active joints, absent columns estimated
   derivatives.py     estimating missing velocities and accelerations (shared with the node)
-  jumps.py           jumps between samples, and wrapped angles
+  jumps.py           jumps between samples and wrapped angles; the default step limit
+                     (shared with the node's max_setpoint_step)
   atomic_files.py    output files written whole or not at all
 """

@@ -39,6 +39,7 @@ from .console import (
     positive_int,
     run_main,
 )
+from .jumps import DEFAULT_MAX_STEP
 from .progress import PROGRESS_MIN_SAMPLES, ProgressBar
 from .solving import solve
 from .stop_signals import StopSignals
@@ -50,12 +51,6 @@ TRACEBACK_ENV = 'COG_ID_TORQUES_TRACEBACK'
 
 DEFAULT_CHUNK = 20_000          # samples per core call
 MAX_LISTED_SKIPS = 20           # skipped rows listed one per line on stderr
-
-#: largest change of an active position between consecutive rows, per row (not per
-#: second): a crank wrapping from +pi to -pi jumps by ~2 pi in one row at any sample rate,
-#: and the solver follows the mechanism from row to row, which is a per-row matter too
-DEFAULT_MAX_STEP = 1.0            # rad, revolute joints (the node's max_setpoint_step too)
-DEFAULT_MAX_STEP_LINEAR = 0.1     # m, prismatic joints
 
 EPILOG = f"""\
 input CSV (comma-separated, header row first):
@@ -76,7 +71,7 @@ derivative estimate (absent columns; needs at least {derivatives.STENCIL} rows):
   range of a double; otherwise the row and the column are named (exit 1).
 
 jumps and wrapped angles: an active position that moves by more than --max-step
-  (default {DEFAULT_MAX_STEP} rad, revolute joints) or --max-step-linear (default {DEFAULT_MAX_STEP_LINEAR} m,
+  (default {DEFAULT_MAX_STEP['rad']} rad, revolute joints) or --max-step-linear (default {DEFAULT_MAX_STEP['m']} m,
   prismatic joints) from one row to the next is a bad row: exit 1, or with
   --skip-invalid the row is skipped with reason 'jump' (and the next row is compared
   with the last row that was not a jump). The limit is per row, not per second: a
@@ -153,15 +148,16 @@ def build_parser():
                         help='who computes the kernels: auto (compiled C where a C compiler '
                              'is there, else Python), native, python (never compile), '
                              'reference (the plain lane code, slow); default auto')
-    parser.add_argument('--max-step', type=positive_float, default=DEFAULT_MAX_STEP,
+    parser.add_argument('--max-step', type=positive_float, default=DEFAULT_MAX_STEP['rad'],
                         metavar='RAD',
                         help='largest change of a revolute active position from one row to the '
-                             f'next (default {DEFAULT_MAX_STEP} rad per row; inf: no limit); a '
-                             'larger jump is a bad row (exit 1, or skipped with --skip-invalid)')
+                             f"next (default {DEFAULT_MAX_STEP['rad']} rad per row; inf: no "
+                             'limit); a larger jump is a bad row (exit 1, or skipped with '
+                             '--skip-invalid)')
     parser.add_argument('--max-step-linear', type=positive_float,
-                        default=DEFAULT_MAX_STEP_LINEAR, metavar='M',
+                        default=DEFAULT_MAX_STEP['m'], metavar='M',
                         help='the same for prismatic active joints (default '
-                             f'{DEFAULT_MAX_STEP_LINEAR} m per row; inf: no limit)')
+                             f"{DEFAULT_MAX_STEP['m']} m per row; inf: no limit)")
     parser.add_argument('--chunk-size', type=positive_int, default=DEFAULT_CHUNK, metavar='N',
                         help=f'samples per solver call (default {DEFAULT_CHUNK}); sets memory use '
                              'and progress-bar steps; results agree to within the closure '

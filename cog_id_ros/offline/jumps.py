@@ -1,9 +1,10 @@
 """Jumps of the active positions from one sample to the next, and angles that wrap.
 
 An active position that moves by more than a limit from one sample to the next is a jump:
-``cog_id_torques`` refuses or skips that row (:func:`find_jumps`). An encoder of a
-continuous joint reports +pi then -pi: :func:`unwrap_positions` takes each angle as the
-2 pi equivalent nearest the previous one.
+``cog_id_torques`` refuses or skips that row (:func:`find_jumps`), the node rejects that
+setpoint (``max_setpoint_step``); both limit it by :data:`DEFAULT_MAX_STEP` unless told
+otherwise. An encoder of a continuous joint reports +pi then -pi: :func:`unwrap_positions`
+takes each angle as the 2 pi equivalent nearest the previous one.
 """
 
 import math
@@ -12,6 +13,14 @@ from typing import Sequence
 import numpy as np
 
 from .trajectory_io import Trajectory, joint_column
+
+#: the largest change of an active position from one sample to the next, by the unit of
+#: the joint's coordinate (its kind's ``unit``: an angle, a length), when none is given:
+#: cog_id_torques' --max-step and --max-step-linear, the node's max_setpoint_step. Per
+#: sample, not per second: a crank wrapping from +pi to -pi jumps by ~2 pi in one sample at
+#: any sample rate, and the solver follows the mechanism from sample to sample, which is a
+#: per-sample matter too
+DEFAULT_MAX_STEP = {'rad': 1.0, 'm': 0.1}
 
 
 def unwrap_positions(traj: Trajectory, joints: Sequence[str]) -> dict[str, tuple[int, int]]:
