@@ -48,7 +48,6 @@ from .paper_four_bar import DURATION, config_dir, exact_torque, target_motion
 
 WARM_UP = 3                       # samples the estimator needs before it is exact
 TOLERANCE = 0.01                  # of the peak torque
-LOST = 3                          # exit status: setpoints went unanswered or unrecorded
 #: s between the nodes' /diagnostics reports: their counters are read once a run is over
 DIAGNOSTICS_PERIOD = 0.2
 
@@ -343,6 +342,8 @@ def main(argv: list[str] | None = None) -> int:
     for line in losses:
         print(line, file=sys.stderr)
     if losses:
+        # the player's exit status for the same (ROS is loaded by now)
+        from ..ros.player import LOST
         return LOST
     return 0 if ok else 1
 
