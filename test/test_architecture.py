@@ -62,7 +62,7 @@ def test_the_graph_sees_every_kind_of_import():
     assert 'cog_id_ros.core.closure' in graph['cog_id_ros.core.mechanism']   # from . import x
     assert 'cog_id_ros.core' in graph['cog_id_ros.ros.node']                 # from ..core import
     assert 'cog_id_ros.ros.player' in graph['cog_id_ros.demos.fig4']          # in a function
-    assert 'cog_id_ros' in graph['cog_id_ros.offline.cli']                   # import cog_id_ros
+    assert 'cog_id_ros' in graph['cog_id_ros.offline.console']               # import cog_id_ros
 
 
 def test_core_imports_nothing_of_the_package_outside_core():

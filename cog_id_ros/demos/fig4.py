@@ -48,7 +48,6 @@ from .paper_four_bar import DURATION, config_dir, exact_torque, target_motion
 
 WARM_UP = 3                       # samples the estimator needs before it is exact
 TOLERANCE = 0.01                  # of the peak torque
-LOST = 3                          # exit status: setpoints went unanswered or unrecorded
 #: s between the nodes' /diagnostics reports: their counters are read once a run is over
 DIAGNOSTICS_PERIOD = 0.2
 
@@ -218,15 +217,20 @@ def plot(path, t, results, rate):
     fig.savefig(path, dpi=110)
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser():
     parser = argparse.ArgumentParser(prog='python -m cog_id_ros.demos.fig4',
                                      description=__doc__.split('\n\n')[0])
     parser.add_argument('--output', default=os.path.join('out', 'fig4_torques.png'),
                         help='PNG to write (default %(default)s); CSVs go beside it')
     parser.add_argument('--rate', type=float, default=1000.0,
                         help='setpoints per second (default %(default)s)')
-    args = parser.parse_args(argv)
+    return parser
 
+
+def ros_environment():
+    """The environment of the nodes (and of this process's own ROS 2 participants): the
+    ROS_DOMAIN_ID given, or one picked from the process id (said); discovery on this
+    machine only."""
     env = dict(os.environ)
     if not env.get('ROS_DOMAIN_ID'):
         env['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 101)
@@ -234,13 +238,13 @@ def main(argv: list[str] | None = None) -> int:
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env['PYTHONUNBUFFERED'] = '1'
     os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
+    return env
 
-    started = time.monotonic()
-    cfg = config_dir()
-    t = np.arange(int(round(DURATION * args.rate)) + 1) / args.rate
-    extra = node_arguments(len(t))
-    procs = {case[0]: NodeProcess(os.path.join(cfg, case[1]), case[2], env, extra(case[2]))
-             for case in CASES}
+
+def run_cases(procs, t):
+    """Play the target motion into every node once it is up and connected: returns the
+    results per case ``(key, case, efforts, found, exact, statistics)``, the runs'
+    accounts, and the nodes' exit statuses (each stopped like Ctrl-C, whatever happened)."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -280,13 +284,14 @@ def main(argv: list[str] | None = None) -> int:
             recorder.close()
         context.try_shutdown()
         codes = {key: proc.stop() for key, proc in procs.items()}
-    plot(args.output, t, results, args.rate)
-    base = os.path.splitext(args.output)[0]
-    for key, case, efforts, found, _, _ in results:
-        trajectory_io.write_efforts(f'{base}_{key}.csv', t, efforts, found, case[3])
+    return results, accounts, codes
 
+
+def print_table(rate, results, accounts):
+    """The summary table and, per node, where its setpoints went; whether every torque is
+    within TOLERANCE."""
     print()
-    print(f'Paper four-bar driven along its target motion at {args.rate:g} Hz over ROS 2 topics')
+    print(f'Paper four-bar driven along its target motion at {rate:g} Hz over ROS 2 topics')
     print(f'(error = |published - exact| once {WARM_UP} consecutive setpoints came before; '
           f'criterion {TOLERANCE:.0%} of peak)')
     header = ('case', 'joint', 'received', 'peak |tau| N m', 'max error N m', 'rms error N m',
@@ -305,6 +310,24 @@ def main(argv: list[str] | None = None) -> int:
                 f'node answered {account.accepted}, rejected {account.rejected}, '
                 f'counted {account.lost} lost')
         print(f'{account.where}: sent {account.sent}, {node}, recorded {account.recorded}')
+    return ok
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    env = ros_environment()
+    started = time.monotonic()
+    cfg = config_dir()
+    t = np.arange(int(round(DURATION * args.rate)) + 1) / args.rate
+    extra = node_arguments(len(t))
+    procs = {case[0]: NodeProcess(os.path.join(cfg, case[1]), case[2], env, extra(case[2]))
+             for case in CASES}
+    results, accounts, codes = run_cases(procs, t)
+    plot(args.output, t, results, args.rate)
+    base = os.path.splitext(args.output)[0]
+    for key, case, efforts, found, _, _ in results:
+        trajectory_io.write_efforts(f'{base}_{key}.csv', t, efforts, found, case[3])
+    ok = print_table(args.rate, results, accounts)
     print(f'wrote {args.output} and {base}_a.csv, {base}_b.csv '
           f'in {time.monotonic() - started:.1f} s')
     for proc in procs.values():
@@ -319,6 +342,8 @@ def main(argv: list[str] | None = None) -> int:
     for line in losses:
         print(line, file=sys.stderr)
     if losses:
+        # the player's exit status for the same (ROS is loaded by now)
+        from ..ros.player import LOST
         return LOST
     return 0 if ok else 1
 

@@ -22,6 +22,8 @@ import sys
 
 import numpy as np
 
+from ..offline.trajectory_io import FIELDS, TIME, joint_column
+
 #: the paper's links, our reading (see config/paper_four_bar_*.yaml): mass kg, length m, g
 M, L, G = 1.0, 0.5, 9.81
 #: the target motion's duration, s
@@ -60,14 +62,13 @@ def config_dir():
         return SOURCE_CONFIG
 
 
-def write_csv(path, t, joints=JOINTS, fields=('position', 'velocity', 'acceleration'),
-              block=100_000):
+def write_csv(path, t, joints=JOINTS, fields=FIELDS, block=100_000):
     """Write the target motion at times ``t`` for ``joints`` with the given columns.
 
     Values are written with ``repr`` (full precision), ``block`` rows at a time so that a
     million-row file needs little memory."""
     t = np.asarray(t, dtype=float)
-    header = ['time'] + [f'{j}.{f}' for j in joints for f in fields]
+    header = [TIME] + [joint_column(j, f) for j in joints for f in fields]
     with open(path, 'w', encoding='utf-8', newline='') as out:
         out.write(','.join(header) + '\n')
         for start in range(0, t.size, block):

@@ -1,10 +1,30 @@
 """cog_id_ros.offline: the offline face (no ROS): the CSV tool ``cog_id_torques``, the
 mechanism report ``cog_id_inspect``, and their parts.
 
-  cli.py             the tool: a CSV trajectory in, torques, summary and plot out
-  trajectory_io.py   reading and writing trajectory CSV files
-  derivatives.py     estimating missing velocities and accelerations (shared with the node)
+cog_id_torques:
+  cli.py             the tool: its options and its run, step by step (a CSV trajectory in,
+                     torques, summary and plot out)
+  skipped_rows.py    rows left unsolved before solving: jumps, pieces too short to estimate
+  solving.py         the samples solved in chunks; a refused row named, or skipped
+  summary.py         peak, RMS and power per joint, as a table or JSON
+  outputs.py         the output paths checked first, the files written together at the end
+  progress.py        the progress bar
   plotting.py        the torque plot
-  inspect.py         the report: tree, loops, DOF, the assembled pose beside the given one
-  mechanism_plot.py  the mechanism drawn at a pose (and snapshots along a trajectory)
+
+cog_id_inspect:
+  inspect.py           the tool: its options and its run
+  inspect_structure.py the report's header, spanning tree, loops and actuation
+  inspect_pose.py      the joint table (given beside assembled pose) and the closure there
+  inspect_motion.py    --trajectory solved along the branch, with snapshots
+  mechanism_plot.py    the mechanism drawn at a pose (and snapshots along a trajectory)
+
+shared (the tools, and some with the node):
+  console.py         exit statuses, one-line errors, the parser, loading, main's frame
+  stop_signals.py    SIGINT, SIGTERM, SIGHUP: a run stops, no temporary file is left
+  trajectory_io.py   reading trajectory CSV files, writing and reading efforts CSV files
+  samples.py         q, qd, qdd of the active joints, absent columns estimated
+  derivatives.py     estimating missing velocities and accelerations (shared with the node)
+  jumps.py           jumps between samples and wrapped angles; the default step limit
+                     (shared with the node's max_setpoint_step)
+  atomic_files.py    output files written whole or not at all
 """

@@ -19,6 +19,7 @@ from typing import Any, Callable, Sequence
 
 from ..core import MechanismConfigError, joints
 from ..core.kernels import BACKENDS
+from ..offline.jumps import DEFAULT_MAX_STEP
 
 #: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters):
 #: the native form (links.*, joints.*) and the URDF form (loop_closures.*; docs/urdf.md)
@@ -33,10 +34,6 @@ def is_mechanism_parameter(name: str) -> bool:
 
 
 TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
-
-#: max_setpoint_step when the parameter is not given, by the unit of the joint's coordinate
-#: (its kind's ``unit``: an angle, a length)
-DEFAULT_MAX_STEP = {'rad': 1.0, 'm': 0.1}
 
 #: QoS overrides the node honours: the policies and their values (depth: 1..MAX_QOS_DEPTH)
 QOS_OVERRIDE_VALUES = {

@@ -17,8 +17,7 @@ import cog_id_ros
 from cog_id_ros.core import joints
 from cog_id_ros.core import spatial as sp
 from cog_id_ros.core.errors import MechanismConfigError
-from cog_id_ros.offline import inspect as inspect_tool
-from cog_id_ros.offline import mechanism_plot
+from cog_id_ros.offline import inspect_pose, mechanism_plot
 
 BACKENDS = ('reference', 'python')
 GRAVITY = 9.81
@@ -214,7 +213,7 @@ def test_a_registered_kind_reads_and_refuses_its_parameters(helical):
 
 def test_tools_show_a_registered_kind_as_it_says(helical):
     mech = cog_id_ros.Mechanism.from_parameters(serial_screw())
-    (row,) = inspect_tool.joint_rows(mech)
+    (row,) = inspect_pose.joint_rows(mech)
     assert row[1] == 'helical' and row[5] == 'rad'
     assert mech.active_kinds[0].effort_unit == 'N m' and not mech.active_kinds[0].wraps
     assert mechanism_plot.figure_kind(mech, mech.assembled_coordinates) == 'spatial'

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
+from cog_id_ros.offline import samples
 from cog_id_ros.offline import trajectory_io as tio
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -88,7 +89,7 @@ def core_torques(params, input_csv, on_invalid=None):
     """The core API's torques on the same samples (fresh solver, one batch call)."""
     mech = cog_id_ros.Mechanism.from_params_file(str(params))
     traj = tio.read_trajectory(input_csv, mech.joints, mech.active_joints)
-    q, qd, qdd, _ = tio.setpoints(traj, mech.active_joints)
+    q, qd, qdd, _ = samples.setpoints(traj, mech.active_joints)
     solver = cog_id_ros.InverseDynamics(mech)
     if on_invalid is None:
         return traj.time, q, qd, solver.torques(q, qd, qdd)
@@ -385,7 +386,7 @@ def test_progress_bar_on_a_terminal_only(tmp_path):
     assert 'solving [' in tty and '\r' in tty
     assert '5,000/12,000 samples' in tty and '100% 12,000/12,000 samples' in tty
     # and no bar for inputs of up to 10,000 samples, even on a terminal: see ProgressBar.wanted
-    from cog_id_ros.offline.cli import ProgressBar
+    from cog_id_ros.offline.progress import ProgressBar
 
     class Tty:
         def isatty(self):

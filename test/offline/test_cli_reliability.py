@@ -27,6 +27,7 @@ from test_cli import (
     write_csv,
 )
 
+from cog_id_ros.offline import samples
 from cog_id_ros.offline import trajectory_io as tio
 
 SLIDER_CRANK = CONFIG / 'slider_crank.yaml'
@@ -290,7 +291,7 @@ def test_time_steps_too_small_or_too_large_to_estimate(tmp_path, times, words):
     assert 'Warning' not in proc.stderr and 'nan' not in proc.stderr
     [line] = error_lines(proc)
     assert "row 2 (line 3 of the file), column 'time'" in line and words in line
-    assert f'{tio.MIN_ESTIMATE_STEP:g} .. {tio.MAX_ESTIMATE_STEP:g} s' in line
+    assert f'{samples.MIN_ESTIMATE_STEP:g} .. {samples.MAX_ESTIMATE_STEP:g} s' in line
     assert sorted(os.listdir(tmp_path)) == ['traj.csv']
 
 
@@ -480,7 +481,7 @@ def test_a_row_error_raised_in_skip_mode_skips_only_that_row():
     reason) instead of marking the row, --skip-invalid still skips just that row, keyed by
     the error's reason, and solves the rest of the chunk."""
     import cog_id_ros
-    from cog_id_ros.offline import cli
+    from cog_id_ros.offline import solving
 
     class Evaluation:
         def __init__(self, q):
@@ -509,7 +510,7 @@ def test_a_row_error_raised_in_skip_mode_skips_only_that_row():
     q = np.arange(10.0).reshape(10, 1)
     q[[3, 7]] = 1e3
     zeros = np.zeros_like(q)
-    efforts, valid, skipped = cli.solve(Solver(), q, zeros, zeros, 4, True, NoBar(), 'f.csv')
+    efforts, valid, skipped = solving.solve(Solver(), q, zeros, zeros, 4, True, NoBar(), 'f.csv')
     assert [(s.row, s.reason) for s in skipped] == [(4, 'out_of_range'), (8, 'out_of_range')]
     assert valid.tolist() == [i not in (3, 7) for i in range(10)]
     np.testing.assert_array_equal(efforts[valid], 2.0 * q[valid])

@@ -1,13 +1,15 @@
 """CSV trajectories: parsing, every rejection with its row and column, derivative filling,
-and atomic writing (cog_id_ros.offline.trajectory_io; no solver involved)."""
+and atomic writing (cog_id_ros.offline.trajectory_io, samples, jumps, atomic_files; no solver
+involved)."""
 import os
 import stat
 
 import numpy as np
 import pytest
 
-from cog_id_ros.offline import derivatives
+from cog_id_ros.offline import atomic_files, derivatives, samples
 from cog_id_ros.offline import trajectory_io as tio
+from cog_id_ros.offline.jumps import find_jumps, unwrap_positions
 
 JOINTS = ['joint1', 'joint2', 'joint3', 'joint4']
 ACTIVE = ['joint3']
@@ -139,13 +141,13 @@ def test_setpoints_estimate_what_is_absent(tmp_path):
     # positions only: velocity and acceleration both from the positions
     traj = read(write(tmp_path, 'time,joint3.position\n' + '\n'.join(
         f'{a!r},{b!r}' for a, b in zip(t.tolist(), q.tolist())) + '\n', name='p.csv'))
-    pos, vel, acc, est = tio.setpoints(traj, ACTIVE)
+    pos, vel, acc, est = samples.setpoints(traj, ACTIVE)
     assert est == ['joint3.velocity', 'joint3.acceleration']
     np.testing.assert_array_equal(vel[:, 0], derivatives.first_derivative(t, q))
     np.testing.assert_array_equal(acc[:, 0], derivatives.second_derivative(t, q))
     # velocity given: the acceleration is its derivative
     traj = read(write(tmp_path, 'time,joint3.position,joint3.velocity\n' + rows + '\n', name='pv.csv'))
-    pos, vel, acc, est = tio.setpoints(traj, ACTIVE)
+    pos, vel, acc, est = samples.setpoints(traj, ACTIVE)
     assert est == ['joint3.acceleration']
     np.testing.assert_array_equal(vel[:, 0], v)
     np.testing.assert_array_equal(acc[:, 0], derivatives.first_derivative(t, v))
@@ -157,7 +159,7 @@ def test_setpoints_use_given_columns_verbatim_and_order_joints_as_active(tmp_pat
             'joint1.velocity,joint1.acceleration\n'
             '0,0.5,1.0,2.0,0.25,0.125,0.0625\n')
     traj = read(write(tmp_path, text), active=['joint3', 'joint1'])
-    q, qd, qdd, est = tio.setpoints(traj, ['joint3', 'joint1'])
+    q, qd, qdd, est = samples.setpoints(traj, ['joint3', 'joint1'])
     assert est == []
     assert q.tolist() == [[2.0, 1.0]]
     assert qd.tolist() == [[0.25, 0.125]]
@@ -167,7 +169,7 @@ def test_setpoints_use_given_columns_verbatim_and_order_joints_as_active(tmp_pat
 def test_estimating_needs_five_rows_and_says_which_column(tmp_path):
     traj = read(write(tmp_path, 'time,joint3.position,joint3.velocity\n0,1,0\n1,1,0\n2,1,0\n'))
     with pytest.raises(tio.TrajectoryError, match="column 'joint3.acceleration': absent.*at least 5 rows"):
-        tio.setpoints(traj, ACTIVE)
+        samples.setpoints(traj, ACTIVE)
 
 
 def test_efforts_round_trip_at_full_precision_with_empty_skipped_cells(tmp_path):
@@ -190,14 +192,14 @@ def test_efforts_round_trip_at_full_precision_with_empty_skipped_cells(tmp_path)
 def test_atomic_output_leaves_nothing_on_failure_and_keeps_an_old_file(tmp_path):
     out = tmp_path / 'out.csv'
     with pytest.raises(RuntimeError):
-        with tio.atomic_output(out) as tmp:
+        with atomic_files.atomic_output(out) as tmp:
             with open(tmp, 'w') as f:
                 f.write('partial')
             raise RuntimeError('boom')
     assert os.listdir(tmp_path) == []
     out.write_text('old')
     with pytest.raises(RuntimeError):
-        with tio.atomic_output(out) as tmp:
+        with atomic_files.atomic_output(out) as tmp:
             raise RuntimeError('boom')
     assert out.read_text() == 'old'
     assert os.listdir(tmp_path) == ['out.csv']
@@ -208,7 +210,7 @@ def test_atomic_output_replaces_and_honours_the_umask(tmp_path):
     out.write_text('old')
     old_mask = os.umask(0o022)
     try:
-        with tio.atomic_output(out) as tmp:
+        with atomic_files.atomic_output(out) as tmp:
             with open(tmp, 'w') as f:
                 f.write('new')
     finally:
@@ -232,11 +234,11 @@ def test_find_jumps_compares_with_the_last_accepted_row():
     the last row that was not one (one wild row is one jump, a lasting offset is many)."""
     q = np.array([[1.0, 0.00], [1.1, 0.00], [7.4, 0.00], [1.2, 0.00], [1.3, 0.50],
                   [1.3, 0.55], [1.3, 0.60]])
-    jumps = tio.find_jumps(q, [0.5, 0.1])
+    jumps = find_jumps(q, [0.5, 0.1])
     assert [(row, k, ref) for row, k, _, ref in jumps] == [(3, 0, 2), (5, 1, 4), (6, 1, 4),
                                                            (7, 1, 4)]
     assert jumps[0][2] == pytest.approx(6.3) and jumps[1][2] == pytest.approx(0.5)
-    assert tio.find_jumps(q, [np.inf, np.inf]) == []
+    assert find_jumps(q, [np.inf, np.inf]) == []
 
 
 def test_unwrap_positions_takes_the_nearest_2pi_equivalent(tmp_path):
@@ -247,7 +249,7 @@ def test_unwrap_positions_takes_the_nearest_2pi_equivalent(tmp_path):
     text = 'time,joint3.position,joint1.position\n' + ''.join(
         f'{0.1 * k!r},{w!r},{w!r}\n' for k, w in enumerate(wrapped.tolist()))
     traj = read(write(tmp_path, text), active=['joint1', 'joint3'])
-    counts = tio.unwrap_positions(traj, ['joint3'])
+    counts = unwrap_positions(traj, ['joint3'])
     assert counts == {'joint3.position': (10, 1)}
     np.testing.assert_allclose(traj.columns['joint3.position'], theta, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(traj.columns['joint1.position'], wrapped)
@@ -258,14 +260,14 @@ def test_output_target_follows_links_and_refuses_special_files(tmp_path):
     never replaces a FIFO by a regular file."""
     (tmp_path / 'real.csv').write_text('old')
     os.symlink('real.csv', tmp_path / 'link.csv')
-    with tio.atomic_output(tmp_path / 'link.csv') as tmp:
+    with atomic_files.atomic_output(tmp_path / 'link.csv') as tmp:
         with open(tmp, 'w') as f:
             f.write('new')
     assert os.path.islink(tmp_path / 'link.csv')
     assert (tmp_path / 'real.csv').read_text() == 'new'
     os.mkfifo(tmp_path / 'pipe')
-    with pytest.raises(tio.OutputPathError, match='FIFO'):
-        with tio.atomic_output(tmp_path / 'pipe'):
+    with pytest.raises(atomic_files.OutputPathError, match='FIFO'):
+        with atomic_files.atomic_output(tmp_path / 'pipe'):
             pass
     assert stat.S_ISFIFO(os.lstat(tmp_path / 'pipe').st_mode)
     assert sorted(os.listdir(tmp_path)) == ['link.csv', 'pipe', 'real.csv']
@@ -279,9 +281,9 @@ def test_setpoints_refuse_time_steps_outside_the_estimate_range(tmp_path, step, 
     traj = read(write(tmp_path, text))
     with np.errstate(all='raise'):
         with pytest.raises(tio.TrajectoryError, match=words) as info:
-            tio.setpoints(traj, ACTIVE)
+            samples.setpoints(traj, ACTIVE)
     assert info.value.row == 2 and info.value.column == 'time'
-    assert f'{tio.MIN_ESTIMATE_STEP:g} .. {tio.MAX_ESTIMATE_STEP:g} s' in str(info.value)
+    assert f'{samples.MIN_ESTIMATE_STEP:g} .. {samples.MAX_ESTIMATE_STEP:g} s' in str(info.value)
 
 
 def test_setpoints_name_the_row_where_an_estimate_overflows(tmp_path):
@@ -292,7 +294,7 @@ def test_setpoints_name_the_row_where_an_estimate_overflows(tmp_path):
     traj = read(write(tmp_path, text))
     with np.errstate(all='raise'):
         with pytest.raises(tio.TrajectoryError, match='beyond the range of a double') as info:
-            tio.setpoints(traj, ACTIVE)
+            samples.setpoints(traj, ACTIVE)
     assert info.value.column == 'joint3.position' and info.value.row is not None
 
 
