@@ -11,12 +11,6 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent / PACKAGE
 MAX_FILE_LINES = 600
 MAX_FUNCTION_LINES = 80
 
-#: modules known to be over MAX_FILE_LINES, relative to the package, while another branch
-#: splits them: each leaves this list when its split is merged (the list is meant to be empty)
-KNOWN_LARGE = (
-    'core/native.py',       # being split in i20-native2
-)
-
 
 def package_files():
     """Every .py file of the package, as (path relative to the package, path)."""
@@ -47,16 +41,9 @@ def functions(source, filename='<source>'):
     return found
 
 
-def test_the_known_large_modules_are_still_large():
-    """An entry of KNOWN_LARGE that is split (gone, or within the bound) leaves the list."""
-    sizes = {name: line_count(path) for name, path in package_files()}
-    stale = [name for name in KNOWN_LARGE if sizes.get(name, 0) <= MAX_FILE_LINES]
-    assert stale == [], f'split now: remove from KNOWN_LARGE: {stale}'
-
-
 def test_no_module_over_the_bound():
     over = [f'{name}: {lines} lines' for name, path in package_files()
-            if name not in KNOWN_LARGE and (lines := line_count(path)) > MAX_FILE_LINES]
+            if (lines := line_count(path)) > MAX_FILE_LINES]
     print('\n'.join(over))
     assert over == [], f'modules over {MAX_FILE_LINES} lines:\n' + '\n'.join(over)
 
