@@ -475,19 +475,26 @@ def test_a_write_that_fails_says_why_and_leaves_nothing(cache):
     assert temporary_files(cache) == []
 
 
+def cached_without_its_optimised_build(cache, monkeypatch):
+    """The slider-crank's kernels cached at -O0 as if their background -O2 build had never
+    finished (QUICK_ABOVE 0: every build is quick first); returns where -O2 would be."""
+    monkeypatch.setattr(native, 'QUICK_ABOVE', 0)
+    cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
+    assert wait_until(lambda: libraries(cache, 'O2') and not glob.glob(str(cache / '*.lock')),
+                      60.0)
+    optimised, = libraries(cache, 'O2')
+    os.unlink(optimised + '.sha256')
+    os.unlink(optimised)
+    return optimised
+
+
 @needs_cc
 def test_a_lock_dated_in_the_future_does_not_hold_up_the_optimised_build(cache, monkeypatch,
                                                                          caplog):
     """Reliability 2, item 8: a lock file dated in the future kept the -O2 build from ever
     starting, without a word (a mechanism stayed at -O0: 58 instead of 41 us a sample on
     the Stewart platform). It counts as stale: removed, said, and the build starts."""
-    monkeypatch.setattr(native, 'QUICK_ABOVE', 0)
-    cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
-    assert wait_until(lambda: libraries(cache, 'O2') and not glob.glob(str(cache / '*.lock')),
-                      60.0)
-    optimised, = libraries(cache, 'O2')
-    os.unlink(optimised + '.sha256')           # as if the -O2 build had never finished
-    os.unlink(optimised)
+    optimised = cached_without_its_optimised_build(cache, monkeypatch)
     lock = re.sub(r'\.O2\..*so$', '.O2.lock', optimised)
     open(lock, 'w').close()
     future = time.time() + 3600.0
@@ -507,13 +514,7 @@ def test_a_cached_source_another_user_may_write_is_not_compiled(cache, monkeypat
     source must be one's own like the libraries: else nothing of that cache is used (the
     kernels are built for this process only, one log line says why) and nothing compiles
     it."""
-    monkeypatch.setattr(native, 'QUICK_ABOVE', 0)
-    cog_id_ros.InverseDynamics(fresh('slider_crank'), backend='native')
-    assert wait_until(lambda: libraries(cache, 'O2') and not glob.glob(str(cache / '*.lock')),
-                      60.0)
-    optimised, = libraries(cache, 'O2')
-    os.unlink(optimised + '.sha256')           # as if the -O2 build had never finished
-    os.unlink(optimised)
+    cached_without_its_optimised_build(cache, monkeypatch)
     source, = glob.glob(str(cache / '*.c'))
     why = hand_to_another_user(source)
     monkeypatch.setattr(native, 'PROCESS', native.ProcessMemory())   # a new process

@@ -8,6 +8,7 @@ Nodes run as subprocesses of this checkout (``python -m cog_id_ros.node``) in na
 of their own; a probe node in this process talks to them over DDS. Waits are generous
 upper bounds, never reached when things work.
 """
+import contextlib
 import os
 import pathlib
 import random
@@ -77,6 +78,25 @@ def process_state(pid):
         return pathlib.Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
     except (OSError, IndexError):
         return ''
+
+
+@contextlib.contextmanager
+def stopped(pids):
+    """The processes ``pids`` stopped (SIGSTOP) in the block; killed at its end if they are
+    still there, whatever happened (never left behind stopped)."""
+    try:
+        for pid in pids:
+            os.kill(pid, signal.SIGSTOP)
+        yield pids
+    finally:
+        for pid in pids:
+            if process_state(pid) not in ('', 'Z'):
+                os.kill(pid, signal.SIGKILL)
+
+
+def gone(pids):
+    """Whether every process of ``pids`` has ended (or is a zombie)."""
+    return all(process_state(pid) in ('', 'Z') for pid in pids)
 
 
 def in_node(rclpy_context, namespace, **params):
@@ -386,10 +406,7 @@ def test_a_long_trajectory_to_a_stopped_process_is_answered_within_its_bound(ros
     whole exchange is now bounded: 0.1 s + 1 ms a point = 20.1 s here."""
     proc = start(ros_process, '/stopbig', '-p', 'trajectory_timeout:=0.1')
     probe = probe_for('/stopbig')
-    stopped = _ready_trajectory_process(proc, probe)
-    try:
-        for pid in stopped:
-            os.kill(pid, signal.SIGSTOP)
+    with stopped(_ready_trajectory_process(proc, probe)) as pids:
         began = time.monotonic()
         probe.trajectories.publish(long_trajectory(20_000))
         kv = wait_values(probe, lambda kv: kv['trajectories_rejected.solver'] == '1',
@@ -400,12 +417,7 @@ def test_a_long_trajectory_to_a_stopped_process_is_answered_within_its_bound(ros
         assert took < 20.1 + 10, f'answered after {took:.1f} s'
         assert proc.wait_for_output('did not answer the trajectory within 20.1 s', 10), \
             proc.output
-        assert wait_until(lambda: all(process_state(pid) in ('', 'Z') for pid in stopped),
-                          10), 'the stopped process lives on'
-    finally:
-        for pid in stopped:     # never left behind stopped, whatever happened
-            if process_state(pid) not in ('', 'Z'):
-                os.kill(pid, signal.SIGKILL)
+        assert wait_until(lambda: gone(pids), 10), 'the stopped process lives on'
     q = np.full((3, 1), 1.4)
     probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
     assert wait_until(lambda: len(probe.effort_trajectories) == 2, timeout=90), proc.output
@@ -418,19 +430,12 @@ def test_sigint_with_an_idle_stopped_trajectory_process_is_quick(ros_process, pr
     trajectory process ends within milliseconds of reading EOF; the node now waits 0.5 s."""
     proc = start(ros_process, '/idlestop')
     probe = probe_for('/idlestop')
-    stopped = _ready_trajectory_process(proc, probe)
-    try:
-        for pid in stopped:
-            os.kill(pid, signal.SIGSTOP)
+    with stopped(_ready_trajectory_process(proc, probe)) as pids:
         began = time.monotonic()
         assert proc.stop(timeout=20) == 0, proc.output
         took = time.monotonic() - began
         assert took < 3.0, f'{took:.1f} s to stop'
-        assert wait_until(lambda: all(process_state(pid) in ('', 'Z') for pid in stopped), 10)
-    finally:
-        for pid in stopped:
-            if process_state(pid) not in ('', 'Z'):
-                os.kill(pid, signal.SIGKILL)
+        assert wait_until(lambda: gone(pids), 10)
 
 
 def test_a_stopped_trajectory_process_dies_with_a_killed_node(ros_process, probe_for):
@@ -439,19 +444,11 @@ def test_a_stopped_trajectory_process_dies_with_a_killed_node(ros_process, probe
     (Linux: prctl PR_SET_PDEATHSIG), which ends a stopped process too."""
     proc = start(ros_process, '/kill9')
     probe = probe_for('/kill9')
-    stopped = _ready_trajectory_process(proc, probe)
-    try:
-        for pid in stopped:
-            os.kill(pid, signal.SIGSTOP)
-        assert wait_until(lambda: all(process_state(pid) == 'T' for pid in stopped), 10)
+    with stopped(_ready_trajectory_process(proc, probe)) as pids:
+        assert wait_until(lambda: all(process_state(pid) == 'T' for pid in pids), 10)
         proc.proc.kill()
         proc.proc.wait(timeout=10)
-        assert wait_until(lambda: all(process_state(pid) in ('', 'Z') for pid in stopped),
-                          10), [process_state(pid) for pid in stopped]
-    finally:
-        for pid in stopped:
-            if process_state(pid) not in ('', 'Z'):
-                os.kill(pid, signal.SIGKILL)
+        assert wait_until(lambda: gone(pids), 10), [process_state(pid) for pid in pids]
     proc.stop()
 
 
