@@ -44,11 +44,12 @@ import numpy as np
 from ..offline import trajectory_io
 from ..ros import recorder as recording
 from ..ros.parameters import MAX_QOS_DEPTH
-from .paper_four_bar import DURATION, config_dir, exact_torque, target_motion
+from .paper_four_bar import DURATION, ConfigNotFound, config_dir, exact_torque, target_motion
 
 WARM_UP = 3                       # samples the estimator needs before it is exact
 TOLERANCE = 0.01                  # of the peak torque
 LOST = 3                          # exit status: setpoints went unanswered or unrecorded
+REFUSED = 2                       # exit status: did not run (no config files)
 #: s between the nodes' /diagnostics reports: their counters are read once a run is over
 DIAGNOSTICS_PERIOD = 0.2
 
@@ -227,6 +228,11 @@ def main(argv: list[str] | None = None) -> int:
                         help='setpoints per second (default %(default)s)')
     args = parser.parse_args(argv)
 
+    try:
+        cfg = config_dir()
+    except ConfigNotFound as exc:
+        print(f'fig4: {exc}', file=sys.stderr)
+        return REFUSED
     env = dict(os.environ)
     if not env.get('ROS_DOMAIN_ID'):
         env['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 101)
@@ -236,7 +242,6 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
 
     started = time.monotonic()
-    cfg = config_dir()
     t = np.arange(int(round(DURATION * args.rate)) + 1) / args.rate
     extra = node_arguments(len(t))
     procs = {case[0]: NodeProcess(os.path.join(cfg, case[1]), case[2], env, extra(case[2]))
