@@ -34,6 +34,15 @@ print(json.dumps({'package': cog_id_ros.__file__, 'loaded': loaded, 'failed': fa
 """
 
 
+def installed_env(target):
+    """The environment of a program run from the install: the checkout off the path (no
+    PYTHON* variable of the test run) and no ament index to fall back on."""
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith('PYTHON') and k != 'AMENT_PREFIX_PATH'}
+    env['PYTHONPATH'] = str(target)
+    return env
+
+
 @pytest.fixture(scope='module')
 def installed(tmp_path_factory):
     """The directory the wheel of this checkout is installed into: the packages at its
@@ -62,8 +71,7 @@ def test_every_installed_config_loads_from_the_installed_location(installed):
     the checkout is installed, and each one loads from share/cog_id_ros/config with the
     installed package."""
     config = installed / 'share' / 'cog_id_ros' / 'config'
-    env = {k: v for k, v in os.environ.items() if not k.startswith('PYTHON')}
-    env['PYTHONPATH'] = str(installed)
+    env = installed_env(installed)
     result = subprocess.run([sys.executable, '-c', LOAD_ALL, str(config)], cwd=installed, env=env,
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
@@ -76,3 +84,40 @@ def test_every_installed_config_loads_from_the_installed_location(installed):
     yamls = [name for name in shipped if name.endswith('.yaml')]
     assert sorted(report['loaded']) == yamls
     assert 'crank_rocker_urdf.yaml' in report['loaded']
+
+
+#: run in the install: where the package and the demos' config directory are
+WHERE = """
+import cog_id_ros
+from cog_id_ros.demos.paper_four_bar import config_dir
+print(cog_id_ros.__file__)
+print(config_dir())
+"""
+
+
+def test_the_installed_demo_table_runs_from_another_directory(installed, tmp_path):
+    """Reliability 2, adversarial check: after installing the wheel, cog_id_demo and
+    ``python -m cog_id_ros.demos.table`` run from another directory died with a traceback
+    "cannot read <site-packages>/config/paper_four_bar_a.yaml": config_dir knew only a
+    source checkout's config/ and the ament index. It now also looks in the installed
+    share/cog_id_ros/config (here the one beside the package, pip --target), and the
+    installed demo prints the table."""
+    env = installed_env(installed)
+    script = installed / 'bin' / 'cog_id_demo'
+    assert script.is_file()
+    for command in ([sys.executable, '-m', 'cog_id_ros.demos.table'], [str(script)]):
+        result = subprocess.run(command + ['--step', '0.5'], cwd=tmp_path, env=env,
+                                capture_output=True, text=True, timeout=300)
+        assert result.returncode == 0, result.stderr
+        assert result.stderr == ''
+        lines = result.stdout.splitlines()
+        assert lines[0].startswith('paper four-bar (Sonoda, Ishii, Isobe)'), result.stdout
+        assert len(lines) == 2 + 5 + 1                  # title, header, t = 0 to 2 s, peak
+        assert lines[-1].startswith('peak |tau|: (a) 6.7593 Nm; (b) 3.3797 / 3.3797 Nm')
+    # the installed package with the installed config files, not the checkout's
+    result = subprocess.run([sys.executable, '-c', WHERE], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    package, config = result.stdout.splitlines()[-2:]
+    assert package.startswith(str(installed)), package
+    assert config == str(installed / 'share' / 'cog_id_ros' / 'config')

@@ -3,6 +3,8 @@
     python -m cog_id_ros.demos.fig4 [--output out/fig4_torques.png] [--rate 1000]
 
 What it does, end to end, as a user would:
+  0. looks for another run of the demo (or nodes with its nodes' names) in its
+     ROS_DOMAIN_ID, and refuses to start beside one (below);
   1. starts two ``cog_id_node`` processes, one per parameter file
      (config/paper_four_bar_a.yaml in namespace /fig4_a, paper_four_bar_b.yaml in /fig4_b),
      reporting /diagnostics every 0.2 s and keeping the whole run in ``joint_effort``'s
@@ -21,18 +23,33 @@ What it does, end to end, as a user would:
      per node, the setpoints sent, what the node says it did with them (its
      /diagnostics counters, read before it is stopped) and the efforts recorded.
 
-Exit status: 0 when every setpoint was answered and recorded and every torque after the
-first samples is within 1 % of the peak; 1 when a torque is not (or a node did not exit
-cleanly); 3 when any setpoint went unanswered or unrecorded, with one line per node
-saying where (``/fig4_a: node: 16 setpoints lost before the node took them``,
-``/fig4_b: recorder: 343 efforts the node sent were not recorded``).
+Exit status:
+  0  every setpoint answered and recorded, and every torque after the first samples within
+     1 % of the peak;
+  1  a torque is not, or a node did not exit cleanly;
+  2  it did not run, or its data are not its own, with one line saying why: the config files
+     are in none of the places looked in (listed), or another run of the demo (or nodes with
+     its nodes' names, or other publishers of its topics) is in its ROS_DOMAIN_ID
+     (``fig4: ROS_DOMAIN_ID 7 is in use by another run of this demo or nodes with its
+     nodes' names (1 other node named /fig4_a/cog_id_node): ... Set another ROS_DOMAIN_ID
+     ... or wait for the other run to end``). Two runs in one domain would each answer and
+     record the other's setpoints. The demo looks before it starts its nodes (its players'
+     names in the domain for LISTEN s), again before it plays, and after its runs (what its
+     recording and its nodes saw: setpoints answered twice, efforts for setpoints it never
+     sent); discovery can take seconds, so a run found only after playing ends with the
+     figure and CSVs written and this line;
+  3  a setpoint went unanswered or unrecorded, with one line per node saying where
+     (``/fig4_a: node: 16 setpoints lost before the node took them``,
+     ``/fig4_b: recorder: 343 efforts the node sent were not recorded``).
 
 It uses ROS_DOMAIN_ID from the environment (or picks one from the process id when unset, and
 says which), with discovery limited to this machine.
 """
 import argparse
+import collections
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -44,10 +61,19 @@ import numpy as np
 from ..offline import trajectory_io
 from ..ros import recorder as recording
 from ..ros.parameters import MAX_QOS_DEPTH
-from .paper_four_bar import DURATION, config_dir, exact_torque, target_motion
+from .paper_four_bar import DURATION, ConfigNotFound, config_dir, exact_torque, target_motion
 
 WARM_UP = 3                       # samples the estimator needs before it is exact
 TOLERANCE = 0.01                  # of the peak torque
+LOST = 3                          # exit status: setpoints went unanswered or unrecorded
+REFUSED = 2                       # exit status: did not run (no config files, domain in use)
+#: s the demo's players' names are in its ROS_DOMAIN_ID before it starts its nodes, looking
+#: for another run (look_around). Discovery is not instant: against a running demo (four
+#: participants) a fresh one here saw the first of them after 0-1.5 s (within 1 s in 8 of 10
+#: tries) and all of them after 0.1-3 s (Fast DDS announces a participant every 3 s). What
+#: is seen late is caught before playing or after the runs (others_in_domain,
+#: mixed_answers), with the same exit status
+LISTEN = 1.0
 #: s between the nodes' /diagnostics reports: their counters are read once a run is over
 DIAGNOSTICS_PERIOD = 0.2
 
@@ -123,6 +149,99 @@ def node_arguments(n_setpoints):
     return extra
 
 
+def node_name(name, namespace):
+    """The fully qualified name of a node of the graph."""
+    return f"{namespace.rstrip('/')}/{name}"
+
+
+def others_in_domain(graph, running):
+    """What in the domain would mix its data with the demo's: one clause each, [] when none.
+
+    ``graph``: a node of the demo (its participant's view of the domain). ``running``: the
+    demo's cog_id_node processes are up and its players publish (they are then counted as
+    its own); else only the players' names are the demo's (:func:`look_around`). Another
+    node named as one of the demo's (``/fig4_a/cog_id_node``, the players
+    ``/fig4_player_a``, ...: another run of the demo has them all), another publisher of
+    the setpoints (its setpoints would reach the demo's nodes) or of the efforts (its
+    efforts would be recorded as the demo's nodes' answers). Subscribers are not counted:
+    one that only listens (``ros2 topic echo``) changes nothing.
+    """
+    own = 1 if running else 0
+    names = collections.Counter(node_name(name, namespace)
+                                for name, namespace in graph.get_node_names_and_namespaces())
+    expected = {}
+    for key, _, namespace, _, _ in CASES:
+        expected[f'/fig4_player_{key}'] = 1
+        expected[f'{namespace}/cog_id_node'] = own
+    found = [f'{names[name] - count} other node{"s" if names[name] - count > 1 else ""} '
+             f'named {name}' for name, count in expected.items() if names[name] > count]
+    for _, _, namespace, _, _ in CASES:
+        for topic in (f'{namespace}/joint_setpoint', f'{namespace}/joint_effort'):
+            extra = graph.count_publishers(topic) - own
+            if extra > 0:
+                found.append(f'{extra} other publisher{"s" if extra > 1 else ""} of {topic}')
+    return found
+
+
+#: the node's warning when it sees others with its name (ros/diagnostics.py)
+SAME_NAME = re.compile(r'(\d+) nodes named (\S+) in the ROS graph')
+
+
+def same_name_nodes(procs):
+    """What the demo's nodes said so far of others with their names, one clause per node:
+    each watches the graph from its start, so it may see another run before the players
+    do."""
+    found = []
+    for proc in procs.values():
+        seen = [match for line in list(proc.lines) if (match := SAME_NAME.search(line))]
+        if seen:
+            count, name = max(seen, key=lambda m: int(m[1])).groups()
+            found.append(f'{name} saw {count} nodes with its name')
+    return found
+
+
+def look_around(seconds):
+    """:func:`others_in_domain` before the demo starts anything: its players' names join the
+    domain for ``seconds`` (so that another run starting meanwhile sees this one) and leave.
+
+    A participant of its own, gone before the nodes start: the players' participant is
+    created after the nodes, as a newcomer discovers the participants already there at
+    once, while a participant that is there first discovered the nodes 2-2.6 s late in
+    most tries here (0.4 s in the other order).
+    """
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    nodes = []
+    try:
+        nodes = [rclpy.create_node(f'fig4_player_{case[0]}', context=context)
+                 for case in CASES]
+        time.sleep(seconds)            # DDS's own threads keep the graph up to date
+        return others_in_domain(nodes[0], running=False)
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        context.try_shutdown()
+
+
+def refusal(others, domain, during=False):
+    """The one line the demo says when its domain is in use (``others``: others_in_domain);
+    ``during``: found only once the run was over (mixed_answers, or late discovery)."""
+    try:
+        example = f' (e.g. ROS_DOMAIN_ID={int(domain) % 101 + 1} ./dev run)'
+    except ValueError:
+        example = ''
+    what = ('the efforts above are mixed with theirs' if during else
+            "their data would mix with this run's")
+    if len(others) > 4:            # one line that still reads as one
+        others = others[:3] + [f'and {len(others) - 3} more']
+    return (f'fig4: ROS_DOMAIN_ID {domain} is in use by another run of this demo or nodes '
+            f"with its nodes' names ({'; '.join(others)}): {what}. Set another "
+            f'ROS_DOMAIN_ID{example} or wait for the other run to end')
+
+
 def connect(player, recorder, namespace):
     """Wait until the player's setpoints reach the node and the node's efforts the
     recorder, both as far as matching can tell (see Recorder.answer_first for the rest)."""
@@ -134,7 +253,7 @@ def connect(player, recorder, namespace):
 
 def run_case(player, recorder, case, t, theta):
     """Play the target motion into one node; returns the recorded efforts, which setpoints
-    have one, and the run's :class:`~cog_id_ros.ros.recorder.Account`."""
+    have one, the run's :class:`~cog_id_ros.ros.recorder.Account` and the setpoints' stamps."""
     from ..ros.player import play_recorded
     _, _, namespace, joints, _ = case
     effort_topic = f'{namespace}/joint_effort'
@@ -150,7 +269,25 @@ def run_case(player, recorder, case, t, theta):
     for i, s in enumerate(stamps):
         if s in received:
             efforts[i] = received[s][1]
-    return efforts, found, result
+    return efforts, found, result, stamps
+
+
+def mixed_answers(recorder, stamps):
+    """What the recording shows of another run in the domain (``stamps``: effort topic ->
+    the stamps of the setpoints this run sent there): one clause per topic, [] when none.
+    A node answers a stamp once (a repeated one is rejected), so an effort for a setpoint
+    this run never sent came from another player's setpoint, and a setpoint answered twice
+    from another node."""
+    found = []
+    for topic, sent in stamps.items():
+        received, messages = recorder.efforts(topic)
+        foreign = len(received.keys() - set(sent))
+        twice = messages - len(received)
+        if foreign:
+            found.append(f'{topic}: {foreign} efforts for setpoints this run never sent')
+        if twice > 0:
+            found.append(f'{topic}: {twice} setpoints answered twice')
+    return found
 
 
 def settled(found):
@@ -244,7 +381,9 @@ def ros_environment():
 def run_cases(procs, t):
     """Play the target motion into every node once it is up and connected: returns the
     results per case ``(key, case, efforts, found, exact, statistics)``, the runs'
-    accounts, and the nodes' exit statuses (each stopped like Ctrl-C, whatever happened)."""
+    accounts, the nodes' exit statuses (each stopped like Ctrl-C, whatever happened), and
+    the other runs or nodes found in the domain before playing or during the runs (nothing
+    is played, and no result returned, when found before)."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -257,6 +396,7 @@ def run_cases(procs, t):
     accounts = []
     recorder = None
     players = {}
+    others = []
     try:
         # one effort per setpoint at most: a queue of len(t) never pushes one out
         recorder = recording.Recorder([f'{case[2]}/joint_effort' for case in CASES], len(t))
@@ -271,12 +411,21 @@ def run_cases(procs, t):
             print(f'{case[2]}: {procs[case[0]].wait_started()}')
         for case in CASES:
             connect(players[case[0]], recorder, case[2])
+        others = others_in_domain(players['a'], running=True) + same_name_nodes(procs)
+        if others:
+            return results, accounts, {}, others
+        stamps = {}
         for case in CASES:
-            efforts, found, account = run_case(players[case[0]], recorder, case, t, theta)
+            efforts, found, account, stamps[f'{case[2]}/joint_effort'] = run_case(
+                players[case[0]], recorder, case, t, theta)
             exact = case[4] * exact_a
             accounts.append(account)
             results.append((case[0], case, efforts, found, exact,
                             statistics(t, efforts, found, exact)))
+        # what joined the domain during the runs (discovery may have been late), or left a
+        # trace in the recording before it left
+        others = (others_in_domain(players['a'], running=True) + same_name_nodes(procs)
+                  + mixed_answers(recorder, stamps))
     finally:
         for player in players.values():
             player.destroy_node()
@@ -284,7 +433,7 @@ def run_cases(procs, t):
             recorder.close()
         context.try_shutdown()
         codes = {key: proc.stop() for key, proc in procs.items()}
-    return results, accounts, codes
+    return results, accounts, codes, others
 
 
 def print_table(rate, results, accounts):
@@ -315,14 +464,28 @@ def print_table(rate, results, accounts):
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    try:
+        cfg = config_dir()
+    except ConfigNotFound as exc:
+        print(f'fig4: {exc}', file=sys.stderr)
+        return REFUSED
     env = ros_environment()
     started = time.monotonic()
-    cfg = config_dir()
     t = np.arange(int(round(DURATION * args.rate)) + 1) / args.rate
+    # another run in this domain (or nodes with these names) would answer this run's
+    # setpoints and publish on its topics: refuse before starting a node that would disturb
+    # it in turn; look again before playing, and after (discovery can take seconds)
+    others = look_around(LISTEN)
+    if others:
+        print(refusal(others, env['ROS_DOMAIN_ID']), file=sys.stderr)
+        return REFUSED
     extra = node_arguments(len(t))
     procs = {case[0]: NodeProcess(os.path.join(cfg, case[1]), case[2], env, extra(case[2]))
              for case in CASES}
-    results, accounts, codes = run_cases(procs, t)
+    results, accounts, codes, others = run_cases(procs, t)
+    if others and not results:
+        print(refusal(others, env['ROS_DOMAIN_ID']), file=sys.stderr)
+        return REFUSED
     plot(args.output, t, results, args.rate)
     base = os.path.splitext(args.output)[0]
     for key, case, efforts, found, _, _ in results:
@@ -336,14 +499,17 @@ def main(argv: list[str] | None = None) -> int:
     if any(code != 0 for code in codes.values()):
         print(f'a node did not exit cleanly: {codes}', file=sys.stderr)
         ok = False
+    if others:
+        # the counts and losses above are two runs' together: none of them says where this
+        # run's setpoints went
+        print(refusal(others, env['ROS_DOMAIN_ID'], during=True), file=sys.stderr)
+        return REFUSED
     # a setpoint without its recorded effort is a hole in the figure and the CSVs: never a
     # success, whichever side lost it
     losses = [f'{a.where}: {a.losses()}' for a in accounts if not a.complete]
     for line in losses:
         print(line, file=sys.stderr)
     if losses:
-        # the player's exit status for the same (ROS is loaded by now)
-        from ..ros.player import LOST
         return LOST
     return 0 if ok else 1
 

@@ -30,9 +30,12 @@ M, L, G = 1.0, 0.5, 9.81
 DURATION = 2.0
 #: the joints driven in config/paper_four_bar_target.csv (the two cranks)
 JOINTS = ('joint1', 'joint3')
+#: the package's own directory (cog_id_ros/)
+PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: the source tree's config/ (an installed package: share/cog_id_ros/config, see config_dir)
-SOURCE_CONFIG = os.path.join(
-    os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), 'config')
+SOURCE_CONFIG = os.path.join(os.path.dirname(PACKAGE_DIR), 'config')
+#: the files a directory must hold to be the demos' config directory
+DEMO_FILES = ('paper_four_bar_a.yaml', 'paper_four_bar_b.yaml')
 DEFAULT_OUTPUT = os.path.join(SOURCE_CONFIG, 'paper_four_bar_target.csv')
 
 
@@ -51,15 +54,55 @@ def exact_torque(theta, thetaddot):
     return (5.0 / 3.0) * M * L * L * thetaddot + 2.0 * M * G * L * np.cos(theta)
 
 
-def config_dir():
-    """config/ of a source checkout, else the installed share/cog_id_ros/config."""
-    if os.path.isdir(SOURCE_CONFIG):
-        return SOURCE_CONFIG
+class ConfigNotFound(FileNotFoundError):
+    """None of the places :func:`config_dir` looks in holds the demos' config files; the
+    message is one line naming every place."""
+
+
+def config_places():
+    """Where :func:`config_dir` looks, in this order (docs/node.md, "Installing with pip"):
+    ``(directory, None)`` per place, or ``(None, why)`` for the ament index when it has no
+    answer.
+
+    1. ``config/`` of a source checkout (the package's parent directory): ``./dev``, an
+       editable install;
+    2. ``share/cog_id_ros/config`` beside the package: ``pip install --target T`` puts the
+       package in ``T/cog_id_ros`` and the data files in ``T/share/cog_id_ros``;
+    3. ``<sys.prefix>/share/cog_id_ros/config``: ``pip install`` into the running
+       interpreter's environment (a venv, or the system's);
+    4. the ament index: ``share/cog_id_ros/config`` of the prefix in ``AMENT_PREFIX_PATH``
+       that has the package (a colcon workspace, sourced).
+    """
+    places = []
+    for directory in (SOURCE_CONFIG,
+                      os.path.join(os.path.dirname(PACKAGE_DIR), 'share', 'cog_id_ros',
+                                   'config'),
+                      os.path.join(sys.prefix, 'share', 'cog_id_ros', 'config')):
+        if (directory, None) not in places:
+            places.append((directory, None))
     try:
         from ament_index_python.packages import get_package_share_directory
-        return os.path.join(get_package_share_directory('cog_id_ros'), 'config')
-    except Exception:  # noqa: BLE001 - no ament index either: report the source path
-        return SOURCE_CONFIG
+        places.append((os.path.join(get_package_share_directory('cog_id_ros'), 'config'),
+                       None))
+    except ImportError:
+        places.append((None, 'the ament index (ament_index_python is not installed)'))
+    except Exception as exc:  # noqa: BLE001 - no AMENT_PREFIX_PATH, or no package in it
+        why = exc.args[0] if exc.args else exc          # a KeyError's text, unquoted
+        places.append((None, f'the ament index ({why})'))
+    return places
+
+
+def config_dir():
+    """The directory holding the demos' config files (DEMO_FILES): the first of
+    :func:`config_places` that has them all. Raises :class:`ConfigNotFound` otherwise."""
+    places = config_places()
+    for directory, _ in places:
+        if directory is not None and all(os.path.isfile(os.path.join(directory, name))
+                                         for name in DEMO_FILES):
+            return directory
+    looked = '; '.join(directory or why for directory, why in places)
+    raise ConfigNotFound(f"cannot find the demo's config files ({', '.join(DEMO_FILES)}): "
+                         f'looked in {looked}')
 
 
 def write_csv(path, t, joints=JOINTS, fields=FIELDS, block=100_000):

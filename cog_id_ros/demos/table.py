@@ -3,7 +3,12 @@
     cog_id_demo [--step 0.1]
     python -m cog_id_ros.demos.table [--step 0.1]
 
-Prints a table; the mechanism files are config/paper_four_bar_a.yaml and _b.yaml.
+Prints a table; the mechanism files are config/paper_four_bar_a.yaml and _b.yaml, found
+by :func:`~cog_id_ros.demos.paper_four_bar.config_dir` (a source checkout's config/, else
+the installed share/cog_id_ros/config).
+
+Exit status: 0 the table printed; 2 the config files are in none of the places looked in
+(one line naming them).
 """
 import argparse
 import os
@@ -12,7 +17,7 @@ import sys
 import numpy as np
 
 from .. import InverseDynamics, Mechanism
-from .paper_four_bar import DURATION, config_dir, target_motion
+from .paper_four_bar import DURATION, ConfigNotFound, config_dir, target_motion
 
 
 def paper_torques(t):
@@ -55,7 +60,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--step', type=float, default=0.1, help='table time step, s (default 0.1)')
     args = parser.parse_args(argv)
     t = np.arange(0.0, DURATION + 1e-9, args.step)
-    print(format_table(t, *paper_torques(t)))
+    try:
+        torques = paper_torques(t)
+    except ConfigNotFound as exc:
+        print(f'{parser.prog}: {exc}', file=sys.stderr)
+        return 2
+    print(format_table(t, *torques))
     return 0
 
 

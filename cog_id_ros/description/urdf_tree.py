@@ -202,24 +202,33 @@ class Robot:
                 axis = self._numbers(tag, 'xyz', what)
             if not math.hypot(*axis) > 0.0:
                 raise self.error(tag.line, f'<axis> of {what} must not be zero-length')
-            tag = self._one(element, 'limit', what)
-            if tag is not None:
-                limit = self._limit(tag, what, kind)
+        # urdfdom parses a <limit> whatever the joint's type: so are its numbers checked here
+        tag = self._one(element, 'limit', what)
+        if tag is not None:
+            limit = self._limit(tag, what, kind)
         return _Joint(name, element.line, kind, ends[0], ends[1], xyz, rpy, axis, limit)
 
     def _limit(self, tag, what, kind):
+        """``(lower, upper, effort)`` of a joint's <limit>, each None when the joint does not
+        use it. Every number written in it (lower, upper, effort, velocity) is read as
+        urdfdom reads it, whatever the joint's type, as urdfdom does; then only what the
+        mechanism needs is kept: position limits of revolute and prismatic joints, a
+        positive effort of a joint that moves. ``velocity`` is checked, never used."""
+        # URDF: an attribute left out is 0
+        written = {key: self._numbers(tag, key, what, count=1, default=(0.0,))[0]
+                   for key in ('lower', 'upper', 'effort', 'velocity')}
+        if kind == 'fixed':
+            return None
         lower = upper = None
         if kind != 'continuous' and ('lower' in tag.attrib or 'upper' in tag.attrib):
-            # URDF: an attribute left out is 0
-            (lower,) = self._numbers(tag, 'lower', what, count=1, default=(0.0,))
-            (upper,) = self._numbers(tag, 'upper', what, count=1, default=(0.0,))
+            lower, upper = written['lower'], written['upper']
             if not lower < upper:
                 raise self.error(tag.line, f'<limit> of {what}: lower ({lower!r}) must be '
                                            f'below upper ({upper!r}); a joint that cannot move '
                                            f'is a fixed joint')
         effort = None
         if 'effort' in tag.attrib:
-            (effort,) = self._numbers(tag, 'effort', what, count=1)
+            effort = written['effort']
             effort = effort if effort > 0.0 else None    # 0 or less: a placeholder, no limit
         return lower, upper, effort
 

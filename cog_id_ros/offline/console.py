@@ -62,8 +62,8 @@ def positive_float(text):
 
 
 def load_mechanism(args):
-    """(Mechanism, InverseDynamics) of ``args.params_file`` (``args.node_name``, ``args.backend``);
-    ToolError (exit EXIT_PARAMS) saying why it cannot be used."""
+    """(Mechanism, InverseDynamics) of the parameter file, node name and backend the command
+    line gave; ToolError (exit EXIT_PARAMS) saying why it cannot be used."""
     import cog_id_ros
     try:
         if args.node_name is None:

@@ -310,3 +310,89 @@ def test_a_robot_description_beyond_the_urdf_limit_is_refused_naming_it(tmp_path
     assert info.value.parameter == 'robot_description'
     assert str(info.value) == (f'robot_description: is {MAX_URDF_SIZE + 1} characters long, '
                                f'more than the supported 8 MB')
+
+
+# --- Reliability 2, adversarial checks: <limit> ------------------------------------------------
+
+#: the coupler joint's axis and <limit> (revolute) as four_bar_urdf writes them
+COUPLER_LIMIT = ('<origin xyz="0.1 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>'
+                 '<limit lower="-6" upper="6" effort="0" velocity="1.0"/>')
+CRANK_AXIS = ('type="continuous"><parent link="ground"/><child link="crank"/>'
+              '<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>')
+
+
+def coupler_limit(**attributes):
+    """The four-bar with the coupler joint's <limit> attributes replaced."""
+    urdf = four_bar_urdf()
+    assert urdf.count(COUPLER_LIMIT) == 1
+    limit = '<limit ' + ' '.join(f'{k}="{v}"' for k, v in attributes.items()) + '/>'
+    return urdf.replace(COUPLER_LIMIT, COUPLER_LIMIT[:COUPLER_LIMIT.index('<limit')] + limit)
+
+
+def crank_limit(limit):
+    """The four-bar with ``limit`` on its continuous crank joint."""
+    urdf = four_bar_urdf()
+    assert urdf.count(CRANK_AXIS) == 1
+    return urdf.replace(CRANK_AXIS, CRANK_AXIS + limit)
+
+
+def not_a_number(attribute, text, joint):
+    return (f'{attribute}={text!r} in <limit> of joint {joint!r}: {text!r} is not a number; '
+            f'write numbers as urdfdom reads them: ASCII digits with an optional sign, '
+            f'decimal point and exponent (e.g. -1.5e-3)')
+
+
+@pytest.mark.parametrize('urdf,line_at,message', [
+    (coupler_limit(lower=-6, upper=6, effort=0, velocity='abc'), 'coupler_joint',
+     not_a_number('velocity', 'abc', 'coupler_joint')),
+    (coupler_limit(lower=-6, upper=6, effort=0, velocity='nan'), 'coupler_joint',
+     not_a_number('velocity', 'nan', 'coupler_joint')),
+    (coupler_limit(lower=-6, upper=6, effort=0, velocity='1_0'), 'coupler_joint',
+     not_a_number('velocity', '1_0', 'coupler_joint')),
+    (coupler_limit(lower=-6, upper=6, effort=0, velocity='1e400'), 'coupler_joint',
+     "velocity='1e400' in <limit> of joint 'coupler_joint': is too large for a double, got "
+     "1e400"),
+    (crank_limit('<limit lower="x" upper="y" effort="1" velocity="1"/>'), 'crank_joint',
+     not_a_number('lower', 'x', 'crank_joint')),
+    (crank_limit('<limit lower="-1" upper="y" effort="1" velocity="1"/>'), 'crank_joint',
+     not_a_number('upper', 'y', 'crank_joint')),
+    (crank_limit('<limit effort="inf" velocity="1"/>'), 'crank_joint',
+     not_a_number('effort', 'inf', 'crank_joint')),
+    (four_bar_urdf(tip=True).replace(
+        '<origin xyz="0.35 0 0" rpy="0.3 -0.2 1.1"/>',
+        '<origin xyz="0.35 0 0" rpy="0.3 -0.2 1.1"/>'
+        '<limit lower="0" upper="0" effort="0" velocity="\u0661"/>'), 'tip_mount',
+     not_a_number('velocity', '\u0661', 'tip_mount')),
+], ids=['velocity_abc', 'velocity_nan', 'velocity_1_0', 'velocity_1e400',
+        'continuous_lower', 'continuous_upper', 'continuous_effort', 'fixed_velocity'])
+def test_every_number_of_a_limit_is_read_as_urdfdom_reads_it(urdf, line_at, message):
+    """Reliability 2, adversarial check: the reader took <limit velocity="abc">, "nan" and
+    "1_0", and lower="x" upper="y" on a continuous joint, all of which urdfdom refuses
+    (it parses lower, upper, effort and velocity of a joint's <limit> whatever the joint's
+    type). Each is refused with the element, the attribute, its line and the text, as the
+    reader's other numbers are; what a joint does not use is still not used."""
+    err = refused(with_robot(urdf, tip='tip_mount' in urdf))
+    assert err.parameter == 'robot_description'
+    assert str(err) == f'robot_description: line {line_of(urdf, line_at)}: {message}'
+
+
+def test_limit_numbers_a_joint_does_not_use_are_checked_and_ignored():
+    """Reliability 2, adversarial check, the other side: well-written numbers of a <limit>
+    that the joint does not use (position limits of a continuous joint, any limit of a fixed
+    joint, the velocity of any) are read and then ignored, as before."""
+    urdf = crank_limit('<limit lower="-1" upper="-2" effort="3.5" velocity="-7"/>')
+    native = native_parameters(with_robot(urdf))
+    assert 'joints.crank_joint.lower' not in native
+    assert 'joints.crank_joint.upper' not in native
+    assert native['joints.crank_joint.effort'] == 3.5
+    urdf = four_bar_urdf(tip=True).replace(
+        '<origin xyz="0.35 0 0" rpy="0.3 -0.2 1.1"/>',
+        '<origin xyz="0.35 0 0" rpy="0.3 -0.2 1.1"/>'
+        '<limit lower="1" upper="-1" effort="5" velocity="+.5e1"/>')
+    native = native_parameters(with_robot(urdf, tip=True))
+    assert not any(key.startswith('joints.tip_mount.') for key in native)
+    native = native_parameters(with_robot(coupler_limit(lower=-6, upper=6, effort=0,
+                                                        velocity='2E+3')))
+    assert native['joints.coupler_joint.lower'] == -6.0
+    assert native['joints.coupler_joint.upper'] == 6.0
+    assert 'joints.coupler_joint.effort' not in native
