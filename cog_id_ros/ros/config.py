@@ -32,13 +32,16 @@ class NodeConfig:
         given or by default, and make the configuration of ``mechanism`` from them.
 
         The mechanism's effort limits (joints.<j>.effort, URDF <limit effort>) are the
-        default of effort_limits; the node's parameter, when given, wins.
+        default of effort_limits; the node's parameter, when given, wins. In a feedback
+        control_mode, joint_states_decimation is 0 unless given.
         """
         active_types = [mechanism.joint_types[mechanism.joints.index(j)]
                         for j in mechanism.active_joints]
         limits = getattr(mechanism, 'effort_limits', None)
-        values = node.declare_table(NODE_PARAMETERS, overrides, active_types,
-                                    {'effort_limits': list(limits) if limits else None})
+        defaults: dict[str, Any] = {'effort_limits': list(limits) if limits else None}
+        if overrides.get('control_mode', 'feedforward') != 'feedforward':
+            defaults['joint_states_decimation'] = 0     # the robot publishes joint_states
+        values = node.declare_table(NODE_PARAMETERS, overrides, active_types, defaults)
         wraps = [kind.wraps for kind in mechanism.active_kinds]
         return cls(mechanism=dict(mechanism.parameters),
                    active_joints=tuple(mechanism.active_joints),
@@ -57,6 +60,11 @@ class NodeConfig:
         """The same configuration with ``backend`` (e.g. the one the node's solver resolved
         'auto' to)."""
         return dataclasses.replace(self, values={**self.values, 'backend': backend})
+
+    @property
+    def feedback(self) -> bool:
+        """Whether commands follow measured states (a control_mode other than feedforward)."""
+        return self.values['control_mode'] != 'feedforward'
 
     @property
     def limited(self) -> bool:

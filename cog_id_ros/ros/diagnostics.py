@@ -59,6 +59,19 @@ DIAGNOSTIC_KEYS = {
     'last_rejection': 'kind and message of the last rejected setpoint',
 }
 
+#: keys of /diagnostics in the feedback modes, besides measurements_rejected.<reason> and
+#: tracking_error.<joint> (q_d - q_m of each active joint at the last command, rad or m)
+FEEDBACK_DIAGNOSTIC_KEYS = {
+    'control_mode': "the node's control_mode",
+    'measurements_accepted': 'measured states commanded from since start',
+    'measurements_rejected': 'measured states rejected since start, never commanded from '
+                             '(sum of measurements_rejected.<kind>)',
+    'measurement_age': 's since the last accepted measured state was received',
+    'tracking_error_max': 'largest |q_d - q_m| of any active joint over the last period, rad '
+                          'or m',
+    'last_measurement_rejection': 'kind and message of the last rejected measured state',
+}
+
 #: compute times kept for the diagnostics median and max (the last N setpoints)
 COMPUTE_TIME_WINDOW = 1000
 
@@ -171,6 +184,29 @@ class Counts:
         self.last_was_rejected = False
         self.period_problems = 0              # rejections + clipping since the last report
         self.period_unstamped = 0             # setpoints stamped 0 since the last report
+        # feedback modes: measured states
+        self.measurement_rejected = collections.Counter(dict.fromkeys(REASONS, 0))
+        self.last_measurement_rejection = ''
+        self.last_measurement_was_rejected = False
+        self.tracking_error: list[float] = []     # q_d - q_m at the last command
+        self.period_tracking_max = 0.0
+
+    def measured(self, error: list[float]) -> None:
+        """A measured state was commanded from; ``error``: q_d - q_m there (or [])."""
+        self.totals['measurements_accepted'] += 1
+        self.last_measurement_was_rejected = False
+        self.tracking_error = error
+        if error:
+            self.period_tracking_max = max(self.period_tracking_max, max(map(abs, error)))
+
+    def reject_measurement(self, reason: str, text: str) -> None:
+        """Count a rejected measured state (no command) and warn about it, throttled."""
+        self.measurement_rejected[reason] += 1
+        self.last_measurement_rejection = f'{reason}: {text}'
+        self.last_measurement_was_rejected = True
+        self.period_problems += 1
+        self.warnings.warn('measured.' + reason,
+                           f'measured state rejected, no command ({reason}): {text}')
 
     def served(self, unstamped: bool) -> None:
         """A setpoint was served (``unstamped``: stamped 0, served at its receipt time)."""
@@ -260,7 +296,12 @@ class Report:
         status = DiagnosticStatus()
         status.name = f'{node.get_fully_qualified_name()}: inverse dynamics'
         status.hardware_id = node.mechanism.name
+        feedback = self._feedback() if node.config.feedback else []
         status.level, status.message = self._level(same_name_nodes)
+        if node.config.feedback and node.counts.last_measurement_was_rejected:
+            status.level = DiagnosticStatus.ERROR
+            status.message = ('last measured state rejected '
+                              f'({node.counts.last_measurement_rejection})')
         values = [('mechanism', node.mechanism.name),
                   ('active_joints', ', '.join(node.config.active_joints)),
                   ('backend', node.solver.backend),
@@ -268,9 +309,28 @@ class Report:
                   ('nodes_with_this_name', same_name_nodes),
                   ('last_closure_residual', f'{residual:.3g}'),
                   ('closure_condition_number', f'{condition:.4g}'),
-                  *self._times()]
+                  *self._times(), *feedback]
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values]
         return status
+
+    def _feedback(self) -> list[tuple[str, Any]]:
+        """The feedback modes' keys (FEEDBACK_DIAGNOSTIC_KEYS); the period's maximum
+        tracking error restarts."""
+        node = self.node
+        counts = node.counts
+        age = node.measurements.age()
+        largest, counts.period_tracking_max = counts.period_tracking_max, 0.0
+        errors = counts.tracking_error or [math.nan] * len(node.config.active_joints)
+        return [('control_mode', node.config.control_mode),
+                ('measurements_accepted', counts.totals['measurements_accepted']),
+                ('measurements_rejected', sum(counts.measurement_rejected.values())),
+                *((f'measurements_rejected.{reason}', count)
+                  for reason, count in counts.measurement_rejected.items()),
+                ('measurement_age', '' if age is None else f'{age:.4f}'),
+                *((f'tracking_error.{joint}', f'{e:.6g}')
+                  for joint, e in zip(node.config.active_joints, errors)),
+                ('tracking_error_max', f'{largest:.6g}'),
+                ('last_measurement_rejection', counts.last_measurement_rejection)]
 
     def _level(self, same_name_nodes: int) -> tuple[bytes, str]:
         """The level and message: the worst of what the period saw."""

@@ -43,12 +43,13 @@ from .diagnostics import (
     ThrottledWarnings,
     guarded,
 )
-from .modes import FeedForward, Mode
+from .measurement_stream import MeasurementStream
+from .modes import Mode, make_mode
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
 from .read_only_node import ReadOnlyNode
 from .setpoint_loop import SetpointLoop
 from .setpoint_stream import SetpointStream
-from .topics import TOPICS, control_qos
+from .topics import FEEDBACK_TOPICS, TOPICS, control_qos
 from .trajectory_worker import TrajectoryWorker
 
 NODE_NAME = 'cog_id_node'
@@ -56,6 +57,9 @@ NODE_NAME = 'cog_id_node'
 
 class CogIdNode(ReadOnlyNode):
     """Inverse dynamics of the mechanism in its parameters, served over topics."""
+
+    #: whether it serves and publishes (a managed node: only while active)
+    active = True
 
     def __init__(self, command_line: Sequence[str] | None = None,
                  interruptible: Callable[[], ContextManager] = contextlib.nullcontext,
@@ -102,6 +106,10 @@ class CogIdNode(ReadOnlyNode):
         with interruptible():
             self.solver = InverseDynamics(self.mechanism, backend=config.backend)  # setpoints
             self.report = Report(self, InverseDynamics(self.mechanism, backend=config.backend))
+            # setpoint -> efforts; a feedback mode: measured state -> efforts too (a solver
+            # of its own: the measured stream's branch continuity)
+            self.mode: Mode = make_mode(config, self.solver, lambda: InverseDynamics(
+                self.mechanism, backend=config.backend))
         # joint_setpoint is served by a thread of its own, trajectories are answered by the
         # trajectory worker's, everything else by the executor: what they share is under it
         self.lock = threading.Lock()
@@ -109,7 +117,8 @@ class CogIdNode(ReadOnlyNode):
         self.setpoints = SetpointStream(
             config, self.counts, self.get_logger(), now_ns,
             lambda: self.setpoint_loop.subscription.get_publisher_count())
-        self.mode: Mode = FeedForward(self.solver)      # setpoint -> efforts
+        self.measurements = MeasurementStream(config, self.mode.needs_velocities) \
+            if self.mode.measured else None
         self.effort_limits = config.effort_limits if config.limited else None  # None: no clip
         self.outputs = EffortMessages(config.active_joints, self.mechanism.joints)
         self._joint_states_countdown = 1      # served setpoints until the next joint_states
@@ -123,9 +132,14 @@ class CogIdNode(ReadOnlyNode):
         self.create_timer(config.diagnostics_period, self.publish_diagnostics)
         if config.setpoint_timeout > 0.0:
             self.create_timer(min(config.setpoint_timeout / 4.0, 0.25), self.check_timeout)
+        if self.measurements is not None:
+            self.create_timer(min(config.measurement_timeout / 4.0, 0.25),
+                              self.check_measurement_timeout)
         self.get_logger().info(start_up_summary(self.mechanism, config))
         for warning in getattr(self.mechanism, 'assembly_warnings', None) or ():
             self.get_logger().warning(f'mechanism: {warning}')
+        for warning in self.mode.gain_warnings() if self.mode.measured else ():
+            self.get_logger().warning(warning)
         self.refuse_changes()
 
     def _create_topics(self) -> None:
@@ -152,6 +166,12 @@ class CogIdNode(ReadOnlyNode):
             self, JointState, TOPICS['joint_setpoint'].name, self.serve_setpoint,
             control_qos(), lock=self.lock, on_error=self._serve_failed, with_info=True,
             qos_overriding_options=qos_options())
+        # feedback modes: the measured states, served like setpoints by a thread of their own
+        self.measurement_loop = SetpointLoop(
+            self, JointState, FEEDBACK_TOPICS['measured_joint_states'].name,
+            self.serve_measurement, control_qos(), lock=self.lock,
+            on_error=self._measurement_failed, with_info=True,
+            qos_overriding_options=qos_options()) if self.measurements is not None else None
         # taken serialized: the executor never deserialises a long trajectory (a C call
         # that holds the GIL for seconds); the trajectory process does
         self.create_subscription(JointTrajectory, TOPICS['joint_trajectory'].name,
@@ -174,6 +194,8 @@ class CogIdNode(ReadOnlyNode):
     def start(self) -> None:
         """Start the setpoint thread and the trajectory worker (once the node is built)."""
         self.setpoint_loop.start()
+        if self.measurement_loop is not None:
+            self.measurement_loop.start()
         self.trajectory_worker.start()
         self._threads_started = True
 
@@ -187,8 +209,9 @@ class CogIdNode(ReadOnlyNode):
             return []
         out = []
         for name, thread in (('setpoint thread', self.setpoint_loop),
+                             ('measured state thread', self.measurement_loop),
                              ('trajectory worker', self.trajectory_worker)):
-            if thread.ended_by_itself:
+            if thread is not None and thread.ended_by_itself:
                 failure = thread.failure
                 out.append(f'{name}: ' + (f'{type(failure).__name__}: {failure}'
                                           if failure is not None else 'ended'))
@@ -200,6 +223,8 @@ class CogIdNode(ReadOnlyNode):
         stopped = self.stopped_threads()
         self._threads_started = False
         self.setpoint_loop.stop()
+        if self.measurement_loop is not None:
+            self.measurement_loop.stop()
         self.trajectory_worker.stop()
         return stopped
 
@@ -217,11 +242,16 @@ class CogIdNode(ReadOnlyNode):
         the order received; every message that queued up while it worked is served next.
         ``info``: rclpy's message info (lost and stale setpoints, :class:`.SetpointStream`).
         """
+        if not self.active:         # a managed node before activate: nothing is published
+            return
         start = time.perf_counter()
         stream, counts = self.setpoints, self.counts
         try:
             q, v, a = stream.take(msg, info)      # checked, unwrapped, estimated
             efforts = self.mode.efforts(q, v, a)
+            if efforts is None:     # a feedback mode: in force; commands follow measurements
+                stream.accept()
+                return
             if not all(map(math.isfinite, efforts)):
                 raise Rejected('out_of_range', 'the torques are not finite at this setpoint')
         except Rejected as exc:
@@ -231,18 +261,7 @@ class CogIdNode(ReadOnlyNode):
             bad = rejection(exc)
             counts.reject(bad.reason, str(bad))
             return
-        if self.effort_limits is not None:
-            tau = np.array(efforts)
-            if self.clip(tau):
-                efforts = tau.tolist()
-        # first the command: what control waits for, published serialized
-        # (conversions.EffortMessages.command_for, cdr.py); the compute time ends when it is
-        # ready to send, the DDS write after that is timed apart (the publish time)
-        command = self.outputs.command_for(efforts)
-        ready = time.perf_counter()
-        self.command_pub.publish(command)
-        counts.publish_times.append(time.perf_counter() - ready)
-        counts.compute_times.append(ready - start)
+        efforts = self._send(efforts, start)
         self.effort_pub.publish(self.outputs.state_for(msg.header, stream.received, v, efforts))
         stream.accept()
         if self.joint_states_pub is not None:       # last: nothing waits for it
@@ -253,6 +272,57 @@ class CogIdNode(ReadOnlyNode):
                     self.publish_joint_states(msg.header.frame_id, stream.stamp, v)
                 except Exception as exc:   # noqa: BLE001 (the setpoint was served: no rejection)
                     counts.internal_error('joint_states', exc)
+
+    def _send(self, efforts: list[float], start: float) -> list[float]:
+        """Clip ``efforts`` and publish them on effort_command; the efforts sent. The
+        compute time (from ``start``, the message's receipt) ends when the command is ready
+        to send; the DDS write after that is timed apart (the publish time)."""
+        if self.effort_limits is not None:
+            tau = np.array(efforts)
+            if self.clip(tau):
+                efforts = tau.tolist()
+        # first the command: what control waits for, published serialized
+        # (conversions.EffortMessages.command_for, cdr.py)
+        command = self.outputs.command_for(efforts)
+        ready = time.perf_counter()
+        self.command_pub.publish(command)
+        counts = self.counts
+        counts.publish_times.append(time.perf_counter() - ready)
+        counts.compute_times.append(ready - start)
+        return efforts
+
+    def serve_measurement(self, msg: JointState, info: dict | None = None) -> None:
+        """Feedback modes: one measured JointState -> effort_command + joint_effort from the
+        mode's law with the setpoint in force, or a counted rejection (never a command from
+        a stale, jumping, non-finite or unclosable measurement). Called by the measured
+        state thread with ``self.lock`` held, once per message, in the order received."""
+        if not self.active:
+            return
+        start = time.perf_counter()
+        stream, counts = self.measurements, self.counts
+        try:
+            q, v = stream.take(msg, info)       # checked, unwrapped
+            efforts = self.mode.command(q, v)
+            if not all(map(math.isfinite, efforts)):
+                raise Rejected('out_of_range', 'the efforts are not finite at this measured '
+                                               'state')
+        except Rejected as exc:
+            counts.reject_measurement(exc.reason, str(exc))
+            return
+        except CogIdError as exc:
+            bad = rejection(exc)
+            counts.reject_measurement(bad.reason, str(bad))
+            return
+        efforts = self._send(efforts, start)
+        self.effort_pub.publish(self.outputs.state_for(msg.header, q, v, efforts))
+        stream.accept()
+        counts.measured(self.mode.error)
+
+    def _measurement_failed(self, exc: Exception) -> None:
+        """A measured state that failed in a way serve_measurement does not expect (a
+        bug): no command, counted as 'solver' and in internal_errors."""
+        self.counts.totals['internal_errors'] += 1
+        self.counts.reject_measurement('solver', f'unexpected {type(exc).__name__}: {exc}')
 
     def publish_joint_states(self, frame_id: str, stamp: int, rates: list[float]) -> None:
         """joint_states: the closed pose the solver served the setpoint at (every joint) and
@@ -281,31 +351,70 @@ class CogIdNode(ReadOnlyNode):
 
     @guarded
     def check_timeout(self) -> None:
-        """When setpoints stop: restart the estimator and apply timeout_behavior, once."""
+        """When setpoints stop: restart the estimator and apply timeout_behavior, once (a
+        feedback mode: the last setpoint stays in force, at rest)."""
         with self.lock:
+            if not self.active:
+                return
             self._check_timeout()
 
     def _check_timeout(self) -> None:
         config = self.config
         if not self.setpoints.stopped_for(config.setpoint_timeout):
             return
+        if self.mode.measured:
+            self.mode.setpoints_stopped()
+            self.get_logger().info(
+                f'no setpoint for {config.setpoint_timeout:g} s: the last one stays in force, '
+                'at rest')
+            return
         self.counts.totals['timeouts'] += 1
+        what = self.apply_timeout_behavior(self.setpoints.last_pose)
+        if what is not None:
+            self.get_logger().info(
+                f'no setpoint for {config.setpoint_timeout:g} s: stream stopped, {what}')
+
+    @guarded
+    def check_measurement_timeout(self) -> None:
+        """Feedback modes: no measured state accepted for measurement_timeout (none came,
+        or each was rejected): timeout_behavior at the last measured pose, once."""
+        with self.lock:
+            if not self.active or not self.measurements.stopped_for(
+                    self.config.measurement_timeout):
+                return
+            self.counts.totals['timeouts'] += 1
+            what = self.apply_timeout_behavior(self.measurements.last_pose)
+            if what is not None:
+                self.get_logger().warning(
+                    f'no measured state accepted for {self.config.measurement_timeout:g} s: '
+                    f'{what}')
+
+    def apply_timeout_behavior(self, pose: Sequence[float] | None) -> str | None:
+        """Publish timeout_behavior's command once (hold: the gravity-holding efforts of
+        ``pose``, or of initial_positions without one); what was done, None if it failed."""
+        config = self.config
         if config.timeout_behavior == 'none':
             what = 'nothing published'
         elif config.timeout_behavior == 'zero':
             self.command_pub.publish(self.outputs.command_for([0.0] * len(config.active_joints)))
             what = 'zero efforts published'
         else:
+            if pose is None:
+                pose = self._initial_active_positions()
             try:
-                tau = self.mode.hold(self.setpoints.last_pose)
+                tau = self.mode.hold(pose)
             except CogIdError as exc:   # cannot happen for a pose just served; be safe
                 self.get_logger().error(f'cannot compute holding efforts: {exc}')
-                return
+                return None
             self.clip(tau)
             self.command_pub.publish(self.outputs.command_for(tau.tolist()))
             what = 'gravity-holding efforts of the last pose published'
-        self.get_logger().info(
-            f'no setpoint for {config.setpoint_timeout:g} s: stream stopped, {what}')
+        return what
+
+    def _initial_active_positions(self) -> list[float]:
+        """The active joints' assembled initial_positions (hold before any pose)."""
+        m = self.mechanism
+        return [float(m.assembled_positions[m.joints.index(j)]) for j in m.active_joints]
 
     # --- trajectories ------------------------------------------------------------------------
 
@@ -350,6 +459,8 @@ class CogIdNode(ReadOnlyNode):
 
     @guarded
     def publish_diagnostics(self) -> None:
+        if not self.active:
+            return
         self.diagnostics.count_same_name_nodes()
         health = self.report.closure_health(self.setpoints.last_pose)   # outside the lock
         with self.lock:

@@ -35,6 +35,12 @@ def is_mechanism_parameter(name: str) -> bool:
 
 TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
 
+#: control_mode: feed-forward (setpoints alone) and the feedback modes (measured states too)
+CONTROL_MODES = ('feedforward', 'computed_torque', 'pd_feedforward', 'gravity_compensation')
+#: default largest move of an active joint between two measured states (rad, m): 200 rad/s
+#: or 20 m/s at 1 kHz, far beyond a physical robot's, far below an encoder glitch's turn
+MEASUREMENT_MAX_STEP = {'rad': 0.2, 'm': 0.02}
+
 #: QoS overrides the node honours: the policies and their values (depth: 1..MAX_QOS_DEPTH)
 QOS_OVERRIDE_VALUES = {
     'history': ('keep_last', 'keep_all', 'system_default'),
@@ -49,9 +55,11 @@ class NodeParameter:
 
     ``kind`` says how a value is checked: ``'number'`` (a float from ``low`` to ``high``,
     or ``special``), ``'integer'`` (an int from ``low`` to ``high``), ``'choice'`` (one of
-    ``choices``), ``'bool'``, or ``'per_joint'`` (one positive float per active joint or one
-    for all; ``None`` or an empty list: ``per_joint_default``). ``description`` is the
-    meaning (markdown: the docs' table; the node's ParameterDescriptor without backticks);
+    ``choices``), ``'bool'``, ``'per_joint'`` (one positive float per active joint or one
+    for all; ``None`` or an empty list: ``per_joint_default``) or ``'gains'`` (one finite
+    float >= 0 per active joint or one for all; ``None`` or an empty list: ``default``).
+    ``description`` is the meaning (markdown: the docs' table; the node's
+    ParameterDescriptor without backticks);
     ``default_text`` the docs' default column where ``default`` alone does not say it.
     """
 
@@ -90,6 +98,8 @@ class NodeParameter:
             return 'true, false'
         if self.kind == 'per_joint':
             return '> 0 each (`.inf`: none); one per active joint or one for all'
+        if self.kind == 'gains':
+            return '≥ 0 each, finite; one per active joint or one for all'
         if self.kind == 'integer':
             text = f'{self.low} to {self.high}'
         elif self.high == math.inf:
@@ -174,8 +184,25 @@ def _check_per_joint(param, value, active_types):
     return np.array(limits)
 
 
+def _check_gains(param, value, active_types):
+    import numpy as np
+    n_act = len(active_types)
+    if value is None or (isinstance(value, (list, tuple)) and len(value) == 0):
+        value = param.default
+    if not isinstance(value, (list, tuple)):
+        value = [value]
+    gains = [_as_number(param, v) for v in value]
+    if len(gains) == 1:
+        gains = gains * n_act
+    if len(gains) != n_act:
+        param.fail(f'needs one gain per active joint ({n_act}) or one for all, got {len(gains)}')
+    if not all(math.isfinite(g) and g >= 0.0 for g in gains):
+        param.fail(f'every gain must be finite and >= 0 {param.unit}, got {gains}')
+    return np.array(gains)
+
+
 _CHECKS = {'number': _check_number, 'integer': _check_integer, 'choice': _check_choice,
-           'bool': _check_bool, 'per_joint': _check_per_joint}
+           'bool': _check_bool, 'per_joint': _check_per_joint, 'gains': _check_gains}
 
 
 def _table(*params: NodeParameter) -> dict[str, NodeParameter]:
@@ -279,11 +306,13 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     '(0: no check)'),
     NodeParameter(
         'joint_states_decimation', 'int', 10, 'integer', low=0, high=1_000_000,
+        default_text='10 (`feedforward`), 0 in the feedback modes',
         description='`joint_states` carries the closed pose of every Nth served setpoint '
                     '(the first one of the node included); the default 10 is 100 Hz at a 1 kHz '
                     'setpoint rate, enough for robot_state_publisher and RViz; 1: every one; '
                     '0: no `joint_states` topic. Published after the command, so it never '
-                    'delays it'),
+                    'delays it. In the feedback modes it is off unless given (the robot '
+                    'publishes that name)'),
     NodeParameter(
         'diagnostics_period', 'double', 1.0, 'number', unit='s', low=0.05, high=3600.0,
         description='s between `/diagnostics` messages'),
@@ -291,6 +320,56 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
         'warning_period', 'double', 1.0, 'number', unit='s', low=1e-3, high=3600.0,
         description='s: each kind of rejected setpoint is logged at most once a period (with '
                     'the number left out)'),
+    NodeParameter(
+        'control_mode', 'string', 'feedforward', 'choice', choices=CONTROL_MODES,
+        description='what a command is computed from (docs/control.md): `feedforward` the '
+                    "setpoint's motion alone, one command per setpoint; `computed_torque`, "
+                    '`pd_feedforward`, `gravity_compensation` the measured state on '
+                    '`measured_joint_states` too, one command per measured state with the '
+                    'latest setpoint in force. Read-only: switching modes needs a restart'),
+    NodeParameter(
+        'kp', 'double[]', 100.0, 'gains', unit='1/s²',
+        description='`computed_torque`: position gain on the acceleration, '
+                    '`qdd_d + kd (qd_d - qd_m) + kp (q_d - q_m)`, one per active joint or one '
+                    'for all (the error of each joint then obeys e¨ + kd e˙ + kp e = 0; '
+                    'underdamped below kd = 2 √kp: a warning at start-up)'),
+    NodeParameter(
+        'kd', 'double[]', 20.0, 'gains', unit='1/s',
+        description='`computed_torque`: velocity gain on the acceleration (see `kp`)'),
+    NodeParameter(
+        'pd_kp', 'double[]', 0.0, 'gains', unit='N m/rad or N/m',
+        description='`pd_feedforward`: stiffness added to the feed-forward efforts, '
+                    '`pd_kp (q_d - q_m) + pd_kd (qd_d - qd_m)`, one per active joint or one '
+                    'for all (0 and `pd_kd` 0: feed-forward at the measured rate, a warning at '
+                    'start-up)'),
+    NodeParameter(
+        'pd_kd', 'double[]', 0.0, 'gains', unit='N m s/rad or N s/m',
+        description='`pd_feedforward`: damping added to the feed-forward efforts (see '
+                    '`pd_kp`; a warning at start-up where a joint would be underdamped, '
+                    'pd_kd < 2 √(pd_kp H_jj) at `initial_positions`)'),
+    NodeParameter(
+        'measurement_timeout', 'double', 0.1, 'number', unit='s', low=1e-3, high=3600.0,
+        description='feedback modes: s without an accepted measured state (none arrived, or '
+                    'each was rejected) after which `timeout_behavior` applies, once, at the '
+                    'last measured pose; a measured state published longer ago than this '
+                    '(by its time of publication and receipt, not its header stamp: the plant '
+                    'may stamp sim time) is rejected (`stale`)'),
+    NodeParameter(
+        'max_measurement_step', 'double[]', None, 'per_joint', what='step',
+        per_joint_default=lambda joint_type: MEASUREMENT_MAX_STEP[joints.kind(joint_type).unit],
+        default_text=f'{MEASUREMENT_MAX_STEP["rad"]!r} rad revolute, '
+                     f'{MEASUREMENT_MAX_STEP["m"]!r} m prismatic',
+        description='feedback modes, rad or m: a measured state that moves an active joint '
+                    'farther than this from the last accepted one (after unwrapping) is '
+                    'rejected (`jump`), never commanded from; after `measurement_timeout` '
+                    'without an accepted one the next starts a new stream (`.inf`: no check)'),
+    NodeParameter(
+        'managed', 'bool', False, 'bool',
+        description='a lifecycle node (`~/change_state`, `~/get_state`): it starts '
+                    'unconfigured; `configure` loads the mechanism and compiles its kernels, '
+                    '`activate` opens the stream (nothing is published before), `deactivate` '
+                    "publishes `timeout_behavior`'s command once and then nothing, `cleanup` "
+                    'releases what configure made. false: the node serves from the start'),
 )
 
 #: rows of the docs' table for parameters the node does not declare from NODE_PARAMETERS:

@@ -83,7 +83,8 @@ class ReadOnlyNode(Node):
         defaults = defaults or {}
         for name, param in table.items():
             value = overrides.get(name, param.default)
-            if defaults.get(name) is not None and (value is None or value == []):
+            if defaults.get(name) is not None and (name not in overrides or value is None
+                                                   or value == []):
                 value = defaults[name]
             value = param.check(value, active_types)
             declared = value.tolist() if isinstance(value, np.ndarray) else value

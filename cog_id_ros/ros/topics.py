@@ -1,7 +1,8 @@
 """The node's topics, written once: name, message type, direction, QoS and meaning.
 
-``TOPICS`` is the one table: the node creates its publishers and subscriptions with these
-names and QoS, and docs/node.md's topic table is generated from it (a test compares)::
+``TOPICS`` is the one table (and ``FEEDBACK_TOPICS``, those of the feedback modes): the
+node creates its publishers and subscriptions with these names and QoS, and docs/node.md's
+topic table is generated from it (a test compares)::
 
     python -m cog_id_ros.ros.topics --markdown
     python -m cog_id_ros.ros.topics --write docs/node.md
@@ -79,6 +80,19 @@ TOPICS: dict[str, Topic] = {t.name: t for t in (
 )}
 
 
+#: topics of the feedback modes (control_mode other than feedforward) only
+FEEDBACK_TOPICS: dict[str, Topic] = {t.name: t for t in (
+    Topic('measured_joint_states', 'sensor_msgs/JointState', 'in (feedback modes)', _CONTROL,
+          "the robot's measured state (remap it to the robot's `/joint_states`): names must "
+          'include every active joint (any order; extra names ignored); `position` required, '
+          '`velocity` required except in `gravity_compensation`; each one accepted gets one '
+          '`effort_command` and one `joint_effort` (its header, the measured positions and '
+          'velocities, the efforts) from the latest setpoint in force; a stale, jumping, '
+          'non-finite or unclosable one gets none and a count that says why '
+          '(docs/control.md)'),
+)}
+
+
 def qos_text(topic: Topic) -> str:
     if topic.qos == _CONTROL:
         return f'reliable, keep-last {CONTROL_QOS_DEPTH}, volatile (overridable)'
@@ -88,7 +102,7 @@ def qos_text(topic: Topic) -> str:
 def markdown_table() -> str:
     """docs/node.md's topic table, generated from TOPICS."""
     rows = ['| topic | type | dir | QoS | what |', '|---|---|---|---|---|']
-    for t in TOPICS.values():
+    for t in (*TOPICS.values(), *FEEDBACK_TOPICS.values()):
         rows.append(f'| `{t.name}` | {t.type} | {t.direction} | {qos_text(t)} | '
                     f'{t.description} |')
     return '\n'.join(rows) + '\n'

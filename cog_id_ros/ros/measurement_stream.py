@@ -1,0 +1,103 @@
+"""The stream of measured JointStates -> the measured state a feedback mode closes its loop
+on, or a Rejected (no physics).
+
+:class:`MeasurementStream` takes each message of ``measured_joint_states`` through the
+checks that keep a bad measurement from the motors, in order: its age (published longer
+than ``measurement_timeout`` ago: ``stale``), the active joints' positions and velocities
+(:func:`.conversions.setpoint_arrays`: names, lengths, ``non_finite``; velocities required
+where the mode needs them), and, within a stream, unwrapping and the step since the last
+accepted measurement (``jump``). Whether the loops close at the measured pose is the
+mode's solve (:mod:`.feedback`). The node calls :meth:`MeasurementStream.accept` once the
+command is published; :meth:`MeasurementStream.stopped_for` says when no measurement was
+accepted for the timeout (``timeout_behavior`` then applies, once, and the next
+measurement starts a new stream).
+"""
+import time
+from typing import Any
+
+from .config import NodeConfig
+from .conversions import JointSelector, Rejected, nearest_turn, setpoint_arrays
+from .setpoint_filter import NANOSECONDS
+
+
+class MeasurementStream:
+    """Checks the measured states of one stream by the node's parameters.
+
+    ``needs_velocities``: the mode's law uses the measured velocities (a measurement
+    without them is rejected, ``malformed``); else they are taken as zero.
+    """
+
+    def __init__(self, config: NodeConfig, needs_velocities: bool) -> None:
+        self.active_joints = list(config.active_joints)
+        self.selector = JointSelector(self.active_joints)
+        self.unwrap = config.unwrap
+        self.max_step = list(config.max_measurement_step)
+        self.timeout = config.measurement_timeout
+        self.max_age_ns = int(config.measurement_timeout * NANOSECONDS)
+        self.needs_velocities = needs_velocities
+        self.last_pose: list[float] | None = None   # positions of the last accepted one
+        self.last_time: float | None = None   # monotonic receipt time of the last accepted one
+        self.stopped = True                   # no measurement yet, or none for the timeout
+        self.accepted = 0
+        self._taken: list[float] = []
+
+    def take(self, msg: Any, info: dict | None = None) -> tuple[list[float], list[float]]:
+        """(positions, velocities) of the active joints of JointState ``msg`` (positions
+        unwrapped within the stream); raises Rejected. ``info``: rclpy's message info (the
+        source and reception timestamps: a measurement published or received longer than
+        measurement_timeout ago is stale)."""
+        if info is not None:
+            self._check_age(info)
+        q, v = setpoint_arrays(msg, self.selector)
+        if v is None:
+            if self.needs_velocities:
+                raise Rejected('malformed', 'no velocities: this control_mode needs the '
+                                            'measured velocity of every active joint')
+            v = [0.0] * len(q)
+        previous = None if self.stopped else self.last_pose
+        if previous is not None:
+            q = [nearest_turn(x, ref) if wrap else x
+                 for x, ref, wrap in zip(q, previous, self.unwrap)]
+            for joint, x, ref, limit in zip(self.active_joints, q, previous, self.max_step):
+                if abs(x - ref) > limit:
+                    raise Rejected('jump', f'measured {joint} moves by {abs(x - ref):.6g} from '
+                                   f'the last accepted measurement (max_measurement_step '
+                                   f'{limit:g}): not commanded from')
+        self._taken = q
+        return q, v
+
+    def accept(self) -> None:
+        """The measurement taken last was commanded from: it is the stream's last pose."""
+        self.last_pose = self._taken
+        self.last_time = time.monotonic()
+        self.stopped = False
+        self.accepted += 1
+
+    def age(self) -> float | None:
+        """Seconds since the last accepted measurement was received (None: none yet)."""
+        return None if self.last_time is None else time.monotonic() - self.last_time
+
+    def stopped_for(self, timeout: float) -> bool:
+        """True, once, when no measurement was accepted for ``timeout`` s: the stream
+        counts as stopped, and the next measurement starts a new one (no jump check)."""
+        if self.stopped or self.last_time is None:
+            return False
+        if time.monotonic() - self.last_time < timeout:
+            return False
+        self.stopped = True
+        return True
+
+    def _check_age(self, info: dict) -> None:
+        """Rejected ('stale') when the measurement was published (DDS's source timestamp,
+        the plant's system clock) or received more than measurement_timeout ago: after the
+        node was stopped and continued, or while it is behind, a command from an old state
+        would close the loop on the past."""
+        now = time.time_ns()
+        for key in ('source_timestamp', 'received_timestamp'):
+            stamp = info.get(key)
+            if stamp and now - stamp > self.max_age_ns:
+                raise Rejected('stale', f'measured state {key.split("_")[0]} '
+                               f'{(now - stamp) / NANOSECONDS:.3g} s ago, more than '
+                               f'measurement_timeout ({self.timeout:g} s): the node was '
+                               'stopped or fell behind (or the clocks of the two machines '
+                               'disagree)')
