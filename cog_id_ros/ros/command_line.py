@@ -112,6 +112,39 @@ def urdf_base_dir(command_line: Sequence[str] | None, node_name: str) -> str | N
     return base
 
 
+def node_name(command_line: Sequence[str] | None, default: str) -> str:
+    """The node's name: ``default``, or the last ``-r __node:=NAME`` (``__name``) rule."""
+    name = default
+    args = list(command_line or ())
+    for arg, value in zip(args, args[1:]):
+        if arg in ('-r', '--remap') and value.split(':=', 1)[0] in ('__node', '__name'):
+            name = value.split(':=', 1)[1]
+    return name
+
+
+def given_value(command_line: Sequence[str] | None, node_name: str, name: str,
+                default: Any = None) -> Any:
+    """The value of parameter ``name`` the command line gives the node ``node_name``
+    (``--params-file`` and ``-p`` rules in their order: the last one counts), read before
+    rclpy does (e.g. ``managed``, which decides what kind of node to build); ``default``
+    when none gives it, or a file cannot be read (rcl will say why)."""
+    value = default
+    args = list(command_line or ())
+    for arg, rule in zip(args, args[1:]):
+        if arg == '--params-file':
+            try:
+                value = params_file.load_params_file(rule, node_name).get(name, value)
+            except MechanismConfigError:
+                pass
+        elif arg in ('-p', '--param') and ':=' in rule and \
+                rule.split(':=', 1)[0].rsplit(':', 1)[-1] == name:
+            try:
+                value = yaml.safe_load(rule.split(':=', 1)[1])
+            except yaml.YAMLError:
+                pass
+    return value
+
+
 def rcl_message(exc: BaseException) -> str:
     """rcl's message for a command line it refused, in one line without its source lines;
     a parse error in a params file names the parameter at the line rcl names."""

@@ -83,7 +83,13 @@ def _exit_at_once(signum: int, frame: object) -> None:
 def _main(args: list[str] | None) -> int:
     import functools
 
-    from .command_line import no_parameters_problem, node_arguments, wants_help
+    from .command_line import (
+        given_value,
+        no_parameters_problem,
+        node_arguments,
+        node_name,
+        wants_help,
+    )
     from .node import NODE_NAME, CogIdNode
     from .startup import cannot_start, run
 
@@ -94,7 +100,11 @@ def _main(args: list[str] | None) -> int:
     problem = no_parameters_problem(argv, PROGRAM)
     if problem:
         return cannot_start(NODE_NAME, problem)
-    return run(NODE_NAME, functools.partial(CogIdNode, command_line=argv), args)
+    node_class = CogIdNode
+    if given_value(argv, node_name(argv, NODE_NAME), 'managed', False) is True:
+        from .managed_node import ManagedCogIdNode  # rclpy.lifecycle: only when asked for
+        node_class = ManagedCogIdNode
+    return run(NODE_NAME, functools.partial(node_class, command_line=argv), args)
 
 
 if __name__ == '__main__':

@@ -63,16 +63,19 @@ class CogIdNode(ReadOnlyNode):
 
     def __init__(self, command_line: Sequence[str] | None = None,
                  interruptible: Callable[[], ContextManager] = contextlib.nullcontext,
-                 **kwargs: Any) -> None:
+                 build: bool = True, **kwargs: Any) -> None:
         """``command_line``: the process's arguments (main() passes them), for the directory
         a relative ``mechanism.urdf_file`` is relative to (:func:`.urdf_base_dir`).
         ``interruptible``: a context manager around the parts of start-up that may take long
         and build no rclpy object (loading the mechanism, compiling its kernels), in which
-        main() lets a stop signal raise (stop_signals.DeferredStop.interruptible)."""
+        main() lets a stop signal raise (stop_signals.DeferredStop.interruptible).
+        ``build``: False leaves the node bare (a managed node builds at configure)."""
         super().__init__(NODE_NAME, **kwargs)
         # the package's Python log lines (the core's: e.g. a fallback to the Python kernels
         # while the solver is built below) in ROS's format, under this node's name
         self._python_logs: PythonLogsToRos | None = PythonLogsToRos.attach(self.get_logger())
+        if not build:
+            return
         try:
             self._build(command_line, interruptible)
         except BaseException:
@@ -87,6 +90,14 @@ class CogIdNode(ReadOnlyNode):
 
     def _build(self, command_line: Sequence[str] | None,
                interruptible: Callable[[], ContextManager]) -> None:
+        overrides = self._read_parameters(command_line, interruptible)
+        self._make(overrides, interruptible)
+        self.refuse_changes()
+
+    def _read_parameters(self, command_line: Sequence[str] | None,
+                         interruptible: Callable[[], ContextManager]) -> dict[str, Any]:
+        """Declare the parameters (read-only), load the mechanism, make the NodeConfig;
+        the values given to the node."""
         overrides = self.override_values()
         base_dir = urdf_base_dir(command_line, self.get_name()) \
             if 'mechanism.urdf_file' in overrides else None
@@ -96,13 +107,20 @@ class CogIdNode(ReadOnlyNode):
                 base_dir=base_dir)
         self.warn_unknown(overrides, lambda name: name in NODE_PARAMETERS
                           or is_mechanism_parameter(name))
-        self.config = config = NodeConfig.declare(self, overrides, self.mechanism)
+        self.config = NodeConfig.declare(self, overrides, self.mechanism)
         self.check_qos_overrides(overrides)
         # The node's time in integer ns, read per setpoint (stamp checks): without
         # use_sim_time (read-only, so fixed from here on) the node's clock is the system
         # clock, which time.time_ns reads too (CLOCK_REALTIME, like rcl's system time) in
         # 0.1 us instead of the 4.7 us of get_clock().now() (measured on the reference VM)
-        now_ns = self._ros_now_ns if self.make_use_sim_time_read_only() else time.time_ns
+        self._now_ns = self._ros_now_ns if self.make_use_sim_time_read_only() else time.time_ns
+        return overrides
+
+    def _make(self, overrides: dict[str, Any],
+              interruptible: Callable[[], ContextManager]) -> None:
+        """Everything that serves: solvers (kernels compiled), mode, streams, topics,
+        trajectory worker, timers (a managed node: at configure; cleanup releases them)."""
+        config = self.config
         with interruptible():
             self.solver = InverseDynamics(self.mechanism, backend=config.backend)  # setpoints
             self.report = Report(self, InverseDynamics(self.mechanism, backend=config.backend))
@@ -115,7 +133,7 @@ class CogIdNode(ReadOnlyNode):
         self.lock = threading.Lock()
         self.counts = Counts(ThrottledWarnings(self.get_logger(), config.warning_period))
         self.setpoints = SetpointStream(
-            config, self.counts, self.get_logger(), now_ns,
+            config, self.counts, self.get_logger(), self._now_ns,
             lambda: self.setpoint_loop.subscription.get_publisher_count())
         self.measurements = MeasurementStream(config, self.mode.needs_velocities) \
             if self.mode.measured else None
@@ -129,18 +147,19 @@ class CogIdNode(ReadOnlyNode):
         self.trajectory_worker = TrajectoryWorker(
             config, self._trajectory_done, backend=self._trajectory_backend(),
             logger_name=self.get_logger().get_child('trajectories').name)
-        self.create_timer(config.diagnostics_period, self.publish_diagnostics)
+        self.timers_made = [self.create_timer(config.diagnostics_period,
+                                              self.publish_diagnostics)]
         if config.setpoint_timeout > 0.0:
-            self.create_timer(min(config.setpoint_timeout / 4.0, 0.25), self.check_timeout)
+            self.timers_made.append(self.create_timer(
+                min(config.setpoint_timeout / 4.0, 0.25), self.check_timeout))
         if self.measurements is not None:
-            self.create_timer(min(config.measurement_timeout / 4.0, 0.25),
-                              self.check_measurement_timeout)
+            self.timers_made.append(self.create_timer(
+                min(config.measurement_timeout / 4.0, 0.25), self.check_measurement_timeout))
         self.get_logger().info(start_up_summary(self.mechanism, config))
         for warning in getattr(self.mechanism, 'assembly_warnings', None) or ():
             self.get_logger().warning(f'mechanism: {warning}')
         for warning in self.mode.gain_warnings() if self.mode.measured else ():
             self.get_logger().warning(warning)
-        self.refuse_changes()
 
     def _create_topics(self) -> None:
         qos_options = QoSOverridingOptions.with_default_policies
@@ -174,9 +193,9 @@ class CogIdNode(ReadOnlyNode):
             qos_overriding_options=qos_options()) if self.measurements is not None else None
         # taken serialized: the executor never deserialises a long trajectory (a C call
         # that holds the GIL for seconds); the trajectory process does
-        self.create_subscription(JointTrajectory, TOPICS['joint_trajectory'].name,
-                                 self.on_trajectory, control_qos(),
-                                 qos_overriding_options=qos_options(), raw=True)
+        self.trajectory_sub = self.create_subscription(
+            JointTrajectory, TOPICS['joint_trajectory'].name, self.on_trajectory, control_qos(),
+            qos_overriding_options=qos_options(), raw=True)
 
     def _trajectory_backend(self) -> str:
         """The backend of the trajectory process: the node's solver's, except that compiled
