@@ -4,10 +4,18 @@
 core's inverse dynamics at the measured state with the commanded acceleration
 (``torques(q_m, qd_m, qdd_d + kd e_dot + kp e)``: H and B of eq. (7) at the measured pose,
 nothing else). With an exact model each joint's error obeys ``e'' + kd e' + kp e = 0``
-(kp in 1/s², kd in 1/s; critically damped at kd = 2 √kp). Docs: docs/control.md.
+(kp in 1/s², kd in 1/s; critically damped at kd = 2 √kp).
+
+Redundant actuation: the law acts on the independent coordinates (the primary actuators,
+``mechanism.primary``): their commanded accelerations ``w`` are expanded to every active
+joint as the closure moves them, ``qdd_d + V_a w`` (``V_a``: the active rows of the
+velocity basis at the measured pose, read from the core's joint rates ``last_pose``), and
+the core distributes the efforts as eq. (7) does. Docs: docs/control.md.
 """
 import math
 from typing import Any
+
+import numpy as np
 
 from .config import NodeConfig
 from .feedback import FeedbackMode, Setpoint, underdamped
@@ -20,13 +28,35 @@ class ComputedTorque(FeedbackMode):
         super().__init__(solver, measured_solver, config)
         self.kp = [float(k) for k in config.kp]
         self.kd = [float(k) for k in config.kd]
+        mech = measured_solver.mechanism
+        self.redundant = mech.is_redundant
+        self.primary = list(mech.primary)
+        self.active_rows = [mech.joints.index(j) for j in mech.active_joints]
 
     def law(self, q_m: list[float], qd_m: list[float], setpoint: Setpoint | None,
             error: list[float], rate_error: list[float]) -> list[float]:
         assert setpoint is not None     # computed torque tracks a setpoint (tracks = True)
         commanded = [a + kd * de + kp * e for a, kd, de, kp, e in
                      zip(setpoint[2], self.kd, rate_error, self.kp, error)]
+        if self.redundant:
+            commanded = self._on_independent(q_m, qd_m, setpoint[2], commanded)
         return self.measured_solver.sample_torques(q_m, qd_m, commanded)
+
+    def _on_independent(self, q_m: list[float], qd_m: list[float],
+                        qdd_d: list[float], commanded: list[float]) -> list[float]:
+        """qdd_d + V_a w, w the feedback accelerations of the primary actuators."""
+        solver = self.measured_solver
+        solver.sample_torques(q_m, qd_m, qdd_d)       # the pose closed at q_m (or the error)
+        columns = []
+        for p in self.primary:          # S u_p: the joint rates of a unit rate of p
+            unit = [0.0] * len(q_m)
+            unit[p] = 1.0
+            rates = solver.last_pose(unit)[1]
+            columns.append([rates[i] for i in self.active_rows])
+        y = np.array(columns).T                        # (M, dof) = V_a G
+        v_a = y @ np.linalg.inv(y[self.primary])      # G: the primary rows of y
+        w = np.array([c - a for c, a in zip(commanded, qdd_d)])[self.primary]
+        return (np.array(qdd_d) + v_a @ w).tolist()
 
     def gain_warnings(self) -> list[str]:
         joints = self.config.active_joints
