@@ -118,11 +118,12 @@ def test_redundant_efforts_are_distributed_as_eq_7():
 
 
 def test_a_measured_pose_whose_loops_cannot_close_raises_and_no_command():
-    mech = Mechanism.from_params_file('config/five_bar.yaml')
+    mech = Mechanism.from_params_file('config/stewart_6ups_spherical.yaml')
     for name in FEEDBACK_MODES:
         mode, _ = mode_for(mech, name, pd_kp=[10.0])
-        with pytest.raises((ClosureError,)):
-            mode.command([2.0, 4.5], [0.0, 0.0])      # links too short to close
+        mode.efforts([0.1326] * 6, [0.0] * 6, [0.0] * 6)
+        with pytest.raises(ClosureError):
+            mode.command([1.1326] + [0.1326] * 5, [0.0] * 6)    # one leg 1 m too long
 
 
 def test_before_a_setpoint_the_first_measured_pose_is_held():
