@@ -49,6 +49,8 @@ class LockstepPlant:
         self._arrived = threading.Event()
         #: every effort_command received (what reached the motors), in order
         self.commands: list[list[float]] = []
+        #: the stamps of the states the node answered (joint_effort), in order
+        self.answered: list[int] = []
         self.node.create_subscription(Float64MultiArray, 'effort_command',
                                       lambda msg: self.commands.append(list(msg.data)),
                                       control_qos())
@@ -64,7 +66,9 @@ class LockstepPlant:
         self._start_ns = time.time_ns()
 
     def _on_effort(self, msg: Any) -> None:
-        if msg.header.stamp.sec * NS + msg.header.stamp.nanosec == self._waiting_for:
+        stamp = msg.header.stamp.sec * NS + msg.header.stamp.nanosec
+        self.answered.append(stamp)
+        if stamp == self._waiting_for:
             self._command = list(msg.effort)
             self._arrived.set()
 
