@@ -76,12 +76,13 @@ class LockstepPlant:
         self.executor.shutdown()
         self.node.destroy_node()
 
-    def connected(self, timeout: float = 20.0) -> bool:
-        """True once the node subscribes both inputs and publishes effort_command."""
+    def connected(self, timeout: float = 20.0, feedback: bool = True) -> bool:
+        """True once the node subscribes both inputs (``feedback`` False: the setpoints)
+        and publishes effort_command."""
         end = time.monotonic() + timeout
         topic = self.node.resolve_topic_name('effort_command')
         while time.monotonic() < end:
-            if self.states.get_subscription_count() and \
+            if (self.states.get_subscription_count() or not feedback) and \
                     self.setpoints.get_subscription_count() and \
                     self.node.count_publishers(topic):
                 return True
@@ -115,6 +116,19 @@ class LockstepPlant:
         self._waiting_for = stamp
         self.states.publish(msg)
 
+    def _answer_to_setpoint(self, t: float, wanted: tuple, timeout: float
+                            ) -> list[float] | None:
+        """Feed-forward: the efforts that answer the setpoint at ``t`` (its joint_effort)."""
+        for _ in range(RESENDS):
+            self._arrived.clear()
+            self._waiting_for = self.stamp(t)
+            self.send_setpoint(t, *wanted)
+            tau = self.command(timeout / RESENDS)
+            if tau is not None:
+                return tau
+            t += 1e-6           # sent again: a later stamp (the node wants them increasing)
+        return None
+
     def command(self, timeout: float) -> list[float] | None:
         """The efforts that answered the last state (its joint_effort), or None within
         ``timeout`` s."""
@@ -122,11 +136,13 @@ class LockstepPlant:
             return None
         return self._command
 
-    def run(self, seconds: float, target: Target | None = None,
-            timeout: float = 5.0) -> dict[str, np.ndarray]:
+    def run(self, seconds: float, target: Target | None = None, timeout: float = 5.0,
+            feedback: bool = True) -> dict[str, np.ndarray]:
         """Step for ``seconds``: per step the setpoint of ``target`` (if any), the state,
         the command, one step. Returns 'time', 'positions', 'setpoints' (NaN without one)
-        and 'efforts' per step (active joints); RuntimeError when a command never came."""
+        and 'efforts' per step (active joints); RuntimeError when a command never came.
+        ``feedback`` False: a node in feedforward mode, which answers the setpoint (no
+        state is sent)."""
         h = self.sim.time_step
         steps = int(round(seconds / h))
         m = len(self.mechanism.active_joints)
@@ -136,13 +152,17 @@ class LockstepPlant:
         for k in range(steps):
             t = self.sim.time
             wanted = target(t) if target is not None else None
-            if wanted is not None:
-                self.send_setpoint(t, *wanted)
-                out['setpoints'][k] = wanted[0]
-                time.sleep(self.settle)
             tau = None
-            for _ in range(RESENDS):      # a state lost or refused (stale: just matched)
-                self.send_state(t)
+            if not feedback:
+                assert wanted is not None, 'feed-forward needs a target'
+                tau = self._answer_to_setpoint(t, wanted, timeout)
+            elif wanted is not None:
+                self.send_setpoint(t, *wanted)
+                time.sleep(self.settle)
+            if wanted is not None:
+                out['setpoints'][k] = wanted[0]
+            for _ in range(RESENDS if feedback else 0):   # a state lost or refused (stale:
+                self.send_state(t)                          # the first, just matched)
                 tau = self.command(timeout / RESENDS)
                 if tau is not None:
                     break

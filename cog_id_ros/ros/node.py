@@ -318,6 +318,9 @@ class CogIdNode(ReadOnlyNode):
         if not self.active:
             return
         start = time.perf_counter()
+        # the setpoints that arrived before this measured state are in force before it is
+        # served, whether or not the setpoint thread has woken up yet
+        self.setpoint_loop.serve_queued()
         stream, counts = self.measurements, self.counts
         try:
             q, v = stream.take(msg, info)       # checked, unwrapped

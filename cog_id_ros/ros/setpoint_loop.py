@@ -170,34 +170,46 @@ class SetpointLoop:
                 if event.is_ready(wait_set):
                     self._handle_event(event)
             while not self._stopping:
-                try:
-                    taken = handle.take_message(msg_type, raw)
-                except Exception as exc:   # noqa: BLE001 (e.g. a message that cannot be taken)
-                    if not context.ok():
-                        return
-                    self._take_failed(exc)
+                # taken and served under the lock: a thread that holds it and serves what
+                # is queued (serve_queued) never finds a message taken here and not served
+                with self._held:
+                    served = self._take_and_serve(handle, msg_type, raw, context)
+                if not served:
                     break
-                if taken is None:
-                    break
-                self._serve(taken)
             if not context.ok():
                 return
 
-    def _serve(self, taken):
-        with self._held:
-            try:
-                if self.with_info:
-                    self.callback(taken[0], taken[1])
-                else:
-                    self.callback(taken[0])
-            except Exception as exc:   # noqa: BLE001 (the loop must outlive a bad message)
-                if self.node.context.ok():
-                    self._report(exc)
+    def serve_queued(self):
+        """Serve every message queued on the subscription now, in this thread (the caller
+        holds ``lock``): e.g. the setpoints that arrived before a measured state, in force
+        before it is served, whatever this loop's thread is doing."""
+        handle, sub = self.subscription.handle, self.subscription
+        while self._take_and_serve(handle, sub.msg_type, sub.raw, self.node.context):
+            pass
 
-    def _take_failed(self, exc):
-        """Taking a message failed: reported like a callback error; the loop waits again."""
-        with self._held:
-            self._report(exc)
+    def _take_and_serve(self, handle, msg_type, raw, context):
+        """Take one message and serve it (the lock held); False when none was queued or
+        taking failed."""
+        try:
+            taken = handle.take_message(msg_type, raw)
+        except Exception as exc:   # noqa: BLE001 (e.g. a message that cannot be taken)
+            if context.ok():
+                self._report(exc)       # reported like a callback error; the loop waits again
+            return False
+        if taken is None:
+            return False
+        self._serve(taken)
+        return True
+
+    def _serve(self, taken):
+        try:
+            if self.with_info:
+                self.callback(taken[0], taken[1])
+            else:
+                self.callback(taken[0])
+        except Exception as exc:   # noqa: BLE001 (the loop must outlive a bad message)
+            if self.node.context.ok():
+                self._report(exc)
 
     def _report(self, exc):
         """``on_error(exc)``; if that fails too, the node's log (the loop goes on)."""
