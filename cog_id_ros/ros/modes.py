@@ -59,7 +59,7 @@ FEEDBACK_MODES = {'computed_torque': ComputedTorque, 'pd_feedforward': PdFeedFor
 
 
 def make_mode(config: NodeConfig, solver: Any, measured_solver: Callable[[], Any]) -> Any:
-    """The mode ``config.control_mode`` names; ``solver`` serves setpoints,
+    """The mode the control_mode parameter names; ``solver`` serves setpoints,
     ``measured_solver()`` makes the solver of the measured states (feedback modes only)."""
     if config.control_mode == 'feedforward':
         return FeedForward(solver)
