@@ -52,7 +52,7 @@ class LockstepPlant:
         #: the stamps of the states the node answered (joint_effort), in order
         self.answered: list[int] = []
         self.node.create_subscription(Float64MultiArray, 'effort_command',
-                                      lambda msg: self.commands.append(list(msg.data)),
+                                      self._on_command,
                                       control_qos())
         # the answer to a state: joint_effort carries its header (the efforts are the
         # command's), so a command is never taken for another state's
@@ -64,6 +64,9 @@ class LockstepPlant:
         self._thread = threading.Thread(target=self.executor.spin, daemon=True)
         self._thread.start()
         self._start_ns = time.time_ns()
+
+    def _on_command(self, msg: Any) -> None:
+        self.commands.append(list(msg.data))
 
     def _on_effort(self, msg: Any) -> None:
         stamp = msg.header.stamp.sec * NS + msg.header.stamp.nanosec
@@ -146,8 +149,8 @@ class LockstepPlant:
         h = self.sim.time_step
         steps = int(round(seconds / h))
         m = len(self.mechanism.active_joints)
-        out = {key: np.full((steps, m), np.nan) for key in ('positions', 'setpoints',
-                                                             'efforts')}
+        out: dict[str, np.ndarray] = {key: np.full((steps, m), np.nan)
+                                      for key in ('positions', 'setpoints', 'efforts')}
         out['time'] = np.zeros(steps)
         for k in range(steps):
             t = self.sim.time

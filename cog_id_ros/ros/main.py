@@ -100,7 +100,7 @@ def _main(args: list[str] | None) -> int:
     problem = no_parameters_problem(argv, PROGRAM)
     if problem:
         return cannot_start(NODE_NAME, problem)
-    node_class = CogIdNode
+    node_class: type[CogIdNode] = CogIdNode
     if given_value(argv, node_name(argv, NODE_NAME), 'managed', False) is True:
         from .managed_node import ManagedCogIdNode  # rclpy.lifecycle: only when asked for
         node_class = ManagedCogIdNode

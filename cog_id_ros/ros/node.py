@@ -21,7 +21,7 @@ import contextlib
 import math
 import threading
 import time
-from typing import Any, Callable, ContextManager, Sequence
+from typing import Any, Callable, ContextManager, Sequence, cast
 
 import numpy as np
 from rclpy.event_handler import PublisherEventCallbacks
@@ -43,6 +43,7 @@ from .diagnostics import (
     ThrottledWarnings,
     guarded,
 )
+from .feedback import FeedbackMode
 from .measurement_stream import MeasurementStream
 from .modes import Mode, make_mode
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
@@ -321,10 +322,11 @@ class CogIdNode(ReadOnlyNode):
         # the setpoints that arrived before this measured state are in force before it is
         # served, whether or not the setpoint thread has woken up yet
         self.setpoint_loop.serve_queued()
-        stream, counts = self.measurements, self.counts
+        stream, counts = cast(MeasurementStream, self.measurements), self.counts
+        mode = cast(FeedbackMode, self.mode)
         try:
             q, v = stream.take(msg, info)       # checked, unwrapped
-            efforts = self.mode.command(q, v)
+            efforts = mode.command(q, v)
             if not all(map(math.isfinite, efforts)):
                 raise Rejected('out_of_range', 'the efforts are not finite at this measured '
                                                'state')
@@ -338,7 +340,7 @@ class CogIdNode(ReadOnlyNode):
         efforts = self._send(efforts, start)
         self.effort_pub.publish(self.outputs.state_for(msg.header, q, v, efforts))
         stream.accept()
-        counts.measured(self.mode.error)
+        counts.measured(mode.error)
 
     def _measurement_failed(self, exc: Exception) -> None:
         """A measured state that failed in a way serve_measurement does not expect (a
@@ -385,7 +387,7 @@ class CogIdNode(ReadOnlyNode):
         if not self.setpoints.stopped_for(config.setpoint_timeout):
             return
         if self.mode.measured:
-            self.mode.setpoints_stopped()
+            cast(FeedbackMode, self.mode).setpoints_stopped()
             self.get_logger().info(
                 f'no setpoint for {config.setpoint_timeout:g} s: the last one stays in force, '
                 'at rest')
@@ -400,12 +402,12 @@ class CogIdNode(ReadOnlyNode):
     def check_measurement_timeout(self) -> None:
         """Feedback modes: no measured state accepted for measurement_timeout (none came,
         or each was rejected): timeout_behavior at the last measured pose, once."""
+        stream = cast(MeasurementStream, self.measurements)
         with self.lock:
-            if not self.active or not self.measurements.stopped_for(
-                    self.config.measurement_timeout):
+            if not self.active or not stream.stopped_for(self.config.measurement_timeout):
                 return
             self.counts.totals['timeouts'] += 1
-            what = self.apply_timeout_behavior(self.measurements.last_pose)
+            what = self.apply_timeout_behavior(stream.last_pose)
             if what is not None:
                 self.get_logger().warning(
                     f'no measured state accepted for {self.config.measurement_timeout:g} s: '
