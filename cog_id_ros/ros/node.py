@@ -285,13 +285,19 @@ class CogIdNode(ReadOnlyNode):
         self.effort_pub.publish(self.outputs.state_for(msg.header, stream.received, v, efforts))
         stream.accept()
         if self.joint_states_pub is not None:       # last: nothing waits for it
-            self._joint_states_countdown -= 1
-            if not self._joint_states_countdown:
-                self._joint_states_countdown = self.config.joint_states_decimation
-                try:
-                    self.publish_joint_states(msg.header.frame_id, stream.stamp, v)
-                except Exception as exc:   # noqa: BLE001 (the setpoint was served: no rejection)
-                    counts.internal_error('joint_states', exc)
+            self._joint_states_due(msg.header.frame_id, stream.stamp, v, self.solver)
+
+    def _joint_states_due(self, frame_id: str, stamp: int, rates: list[float],
+                          solver: Any) -> None:
+        """joint_states for every joint_states_decimation-th command (``solver``: the one
+        whose last pose the command was computed at)."""
+        self._joint_states_countdown -= 1
+        if not self._joint_states_countdown:
+            self._joint_states_countdown = self.config.joint_states_decimation
+            try:
+                self.publish_joint_states(frame_id, stamp, rates, solver)
+            except Exception as exc:   # noqa: BLE001 (the command is out: no rejection)
+                self.counts.internal_error('joint_states', exc)
 
     def _send(self, efforts: list[float], start: float) -> list[float]:
         """Clip ``efforts`` and publish them on effort_command; the efforts sent. The
@@ -341,6 +347,9 @@ class CogIdNode(ReadOnlyNode):
         self.effort_pub.publish(self.outputs.state_for(msg.header, q, v, efforts))
         stream.accept()
         counts.measured(mode.error)
+        if self.joint_states_pub is not None:       # when given: the measured pose, closed
+            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            self._joint_states_due(msg.header.frame_id, stamp, v, mode.measured_solver)
 
     def _measurement_failed(self, exc: Exception) -> None:
         """A measured state that failed in a way serve_measurement does not expect (a
@@ -348,13 +357,16 @@ class CogIdNode(ReadOnlyNode):
         self.counts.totals['internal_errors'] += 1
         self.counts.reject_measurement('solver', f'unexpected {type(exc).__name__}: {exc}')
 
-    def publish_joint_states(self, frame_id: str, stamp: int, rates: list[float]) -> None:
+    def publish_joint_states(self, frame_id: str, stamp: int, rates: list[float],
+                             solver: Any = None) -> None:
         """joint_states: the closed pose the solver served the setpoint at (every joint) and
-        the joint rates there from the active ``rates`` used, read from the core."""
+        the joint rates there from the active ``rates`` used, read from the core (``solver``:
+        the node's setpoint solver by default; a feedback mode's measured one)."""
+        solver = self.solver if solver is None else solver
         try:
-            q, qdot = self.solver.last_pose(rates)
+            q, qdot = solver.last_pose(rates)
         except CogIdError:      # rates too large for the joint rates: positions alone
-            q, qdot = self.solver.last_pose()[0], []
+            q, qdot = solver.last_pose()[0], []
         self.joint_states_pub.publish(self.outputs.pose_for(frame_id, stamp, q, qdot))
 
     def clip(self, tau: np.ndarray) -> bool:

@@ -171,6 +171,15 @@ def test_pd_feedforward_tracks_within_the_bound_of_its_gains(loops, key):
     assert (error[t >= 0.5] < loop.scale(BOUND)).all(), error[t >= 0.5].max(axis=0)
 
 
+def process_state(pid):
+    """The state letter of process ``pid`` (R, S, T stopped, ...), '' once it is gone."""
+    try:
+        with open(f'/proc/{pid}/stat', encoding='ascii') as stream:
+            return stream.read().rsplit(')', 1)[1].split()[0]
+    except (OSError, IndexError):
+        return ''
+
+
 def _no_answer(loop, positions, velocities=None, wait=0.5):
     """Send one measured state; True when no joint_effort answers it within ``wait`` s."""
     loop.plant.send_state(loop.sim.time + 1e-4, positions, velocities)
@@ -219,8 +228,10 @@ def test_stale_measurements_never_reach_the_motors_and_a_stopped_stream_holds_on
     loop.plant.run(0.05)
     held = len(loop.plant.commands)
     rejected = int(loop.values_after(time.monotonic())['measurements_rejected.stale'])
-    os.kill(loop.proc.proc.pid, signal.SIGSTOP)
+    pid = loop.proc.proc.pid
+    os.kill(pid, signal.SIGSTOP)
     try:
+        assert wait_until(lambda: process_state(pid) == 'T', timeout=10)
         stale = []
         for k in range(5):
             loop.plant.send_state(loop.sim.time + (k + 1) * 1e-4)
@@ -228,7 +239,7 @@ def test_stale_measurements_never_reach_the_motors_and_a_stopped_stream_holds_on
             time.sleep(0.1)
         time.sleep(0.5)         # the last one too is older than measurement_timeout
     finally:
-        os.kill(loop.proc.proc.pid, signal.SIGCONT)
+        os.kill(pid, signal.SIGCONT)
     assert wait_until(lambda: len(loop.plant.commands) > held, timeout=10)
     time.sleep(1.0)
     assert not set(stale) & set(loop.plant.answered)
