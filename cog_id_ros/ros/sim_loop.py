@@ -18,10 +18,10 @@ import threading
 import time
 from typing import Any, Callable, Sequence
 
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from ..core import CogIdError
+from . import cdr
 from .setpoint_filter import NANOSECONDS
 from .sim_efforts import EffortHold
 
@@ -78,12 +78,10 @@ class StateOutputs:
         self.state.name = list(joints)
         self.active_index = list(active_index)
         self.joint_states_pub, self.clock_pub = joint_states_pub, clock_pub
-        self.clock_msg = Clock()
 
     def publish_clock(self, stamp_ns: int) -> None:
         if self.clock_pub is not None:
-            self.clock_msg.clock.sec, self.clock_msg.clock.nanosec = divmod(stamp_ns, NANOSECONDS)
-            self.clock_pub.publish(self.clock_msg)
+            self.clock_pub.publish(cdr.clock(stamp_ns))     # serialized: no conversion
 
     def publish_state(self, stamp_ns: int, positions: list[float], velocities: list[float],
                       efforts: Sequence[float]) -> None:
@@ -123,13 +121,20 @@ class Integrator:
         sim = self.simulation
         self.time, self.residual = sim.time, sim.closure_residual
         self.steps = round(sim.time / sim.time_step)
+        self.stamp_ns = round(self.time * NANOSECONDS)
 
-    def begin(self, efforts: Sequence[float] | None = None) -> None:
-        """Publish the state as it is (time 0: start, reset)."""
-        self._publish(efforts if efforts is not None else [0.0] * self.hold.size)
+    def begin(self) -> None:
+        """Publish the state as it is (time 0: start, reset), and the clock."""
+        self.outputs.publish_clock(self.stamp_ns)
+        self._publish([0.0] * self.hold.size)
 
     def step(self) -> bool:
-        """One step with the efforts held now; False when it stopped the integration."""
+        """One step with the efforts held now; False when it stopped the integration.
+
+        The per-step path: the Simulation's step, the clock; every ``every`` steps the
+        joint state, checked finite first (a Simulation raises for a pose it cannot close:
+        a state that is not finite, e.g. efforts that throw a link to 1e300 rad/s, stops
+        it here, and nothing that is not finite is published)."""
         with self.lock:
             tau = self.hold.acting(self.time)
         sim = self.simulation
@@ -138,26 +143,22 @@ class Integrator:
         except CogIdError as exc:
             self.stop(getattr(exc, 'reason', None) or type(exc).__name__, str(exc))
             return False
-        self._snapshot()
-        if not (_finite(sim.positions) and _finite(sim.velocities)):
-            self.stop('non_finite', f'the state is not finite at t = {self.time:.6g} s (efforts '
-                                    f'{tau}): the motion diverged')
-            return False
-        self.outputs.publish_clock(self.stamp_ns)
+        self.steps += 1
+        self.time = time_now = sim.time
+        self.residual = sim.closure_residual
+        self.stamp_ns = stamp = round(time_now * NANOSECONDS)
+        self.outputs.publish_clock(stamp)
         if self.steps % self.every == 0:
             return self._publish(tau)
         return True
-
-    @property
-    def stamp_ns(self) -> int:
-        return round(self.time * NANOSECONDS)
 
     def _publish(self, efforts: Sequence[float]) -> bool:
         sim = self.simulation
         positions = sim.joint_positions().tolist()
         velocities = sim.joint_velocities().tolist()
         if not (_finite(positions) and _finite(velocities)):
-            self.stop('non_finite', f'the joint state is not finite at t = {self.time:.6g} s')
+            self.stop('non_finite', f'the state is not finite at t = {self.time:.6g} s (efforts '
+                                    f'{list(efforts)}): the motion diverged')
             return False
         self.outputs.publish_state(self.stamp_ns, positions, velocities, efforts)
         return True
@@ -176,7 +177,6 @@ class Integrator:
             self.hold.reset()
         self.error, self.error_reason = None, ''
         self._snapshot()
-        self.outputs.publish_clock(self.stamp_ns)
         self.begin()
         return 'reset: initial_positions at rest, time 0, no effort held'
 
@@ -231,7 +231,6 @@ class SimLoop:
     def _run(self) -> None:
         try:
             self.integrator.begin()
-            self.integrator.outputs.publish_clock(self.integrator.stamp_ns)
             self._loop()
         except BaseException as exc:   # noqa: BLE001 (recorded, then the thread ends)
             if self.context.ok() and not self._stopping:
