@@ -12,6 +12,7 @@ connect without a remap. Importing this needs no ROS; :func:`clock_qos` imports 
 it is called.
 """
 import sys
+from typing import Any
 
 from .parameters import docs_main
 from .topics import CONTROL_QOS_DEPTH, DIAGNOSTICS_QOS_DEPTH, TOPICS, Topic
@@ -21,7 +22,7 @@ CLOCK = 'clock'
 SERVICE = 'service'
 
 
-def clock_qos():
+def clock_qos() -> Any:
     """The QoS of ``/clock``: reliable, keep-last 1, volatile: the newest time only, heard
     by rclpy's time source (best effort) and by reliable readers alike."""
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
