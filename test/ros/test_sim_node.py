@@ -237,6 +237,29 @@ def test_bad_messages_are_counted_and_never_integrated(swing):
     assert 'rejected, not integrated (magnitude)' in proc.output
 
 
+def test_an_effort_stream_that_stops_is_zeroed_after_effort_timeout(swing):
+    """One message (after the free-swing tests: it ends the free swing): it acts for
+    effort_timeout (0.5 s) of simulated time, then zeros act (effort_timeout_behavior)."""
+    proc, probe, params = swing
+    sent = time.monotonic()
+    probe.send_named(['joint1', 'joint3'], [9.0, 1.25])
+
+    def acted():
+        return sorted(ns(m.header.stamp) for t, m in list(probe.states)
+                      if t > sent and m.effort[2] == 1.25)
+    status = probe.status_after(sent, lambda s: values(s)['effort_timeouts'] == '1')
+    got = values(status)
+    assert got['effort_stream'] == 'stopped (zero)' and got['efforts_accepted'] == '1'
+    stamps = acted()
+    assert stamps, proc.output[-2000:]
+    # every joint_states from the first with the effort to the last: 5 ms apart, 0.5 s long
+    assert np.diff(stamps).tolist() == [5_000_000] * (len(stamps) - 1)
+    assert 0.49 * NS <= stamps[-1] - stamps[0] <= 0.5 * NS
+    after = [m for _, m in list(probe.states) if ns(m.header.stamp) > stamps[-1]]
+    assert after and all(list(m.effort) == [0.0] * 4 for m in after)
+    assert [m.effort for _, m in probe.states if ns(m.header.stamp) == stamps[0]][0][0] == 0.0
+
+
 # --- a stop at a pose that cannot be closed; ~/reset ---------------------------------------
 
 NON_GRASHOF = """
