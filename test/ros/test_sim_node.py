@@ -423,3 +423,15 @@ def test_a_parameter_it_cannot_honour_is_one_line_and_exit_status_2(ros_process)
     assert proc.proc.wait(timeout=60) == 2
     assert 'cog_sim_node: cannot start: real_time_factor: must be from 0.001 to 1000' \
         in proc.output
+
+
+def test_help_and_no_parameters(ros_env):
+    import subprocess
+    import sys
+    exe = [sys.executable, '-m', 'cog_id_ros.ros.sim_main']
+    shown = subprocess.run([*exe, '--help'], env=ros_env, capture_output=True, text=True,
+                           timeout=60)
+    assert shown.returncode == 0 and shown.stdout.startswith('usage: cog_sim_node')
+    bare = subprocess.run(exe, env=ros_env, capture_output=True, text=True, timeout=60)
+    assert bare.returncode == 2
+    assert bare.stderr.startswith('cog_sim_node: cannot start: no mechanism parameters given')
