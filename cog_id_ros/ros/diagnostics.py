@@ -353,6 +353,15 @@ class Report:
             return DiagnosticStatus.WARN, (f'{unstamped} setpoint(s) stamped 0 in the last '
                                            'period: accelerations estimated from receipt times '
                                            '(noisy)')
+        measured = self.node.measurements if self.node.config.feedback else None
+        if measured is not None:        # a feedback mode: commands follow measured states
+            mode = self.node.config.control_mode
+            if measured.last_time is None:
+                return DiagnosticStatus.OK, f'{mode}: ready, no measured state yet'
+            if measured.stopped:
+                return DiagnosticStatus.WARN, (f'{mode}: measured states stopped '
+                                               f'({self.node.config.timeout_behavior})')
+            return DiagnosticStatus.OK, f'{mode}: serving measured states'
         if stream.last_time is None:
             return DiagnosticStatus.OK, 'ready, no setpoint yet'
         if stream.stopped:
