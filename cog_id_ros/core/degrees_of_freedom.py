@@ -74,6 +74,11 @@ def primary_actuators(mech, matrix, dof):
             best, best_cond = combo, cond
     if best is None or not best_cond <= mech.max_condition_number:
         hint = _gimbal_lock_hint(mech)
+        if mech.locked_joints and not hint:
+            hint = (f"; the locked joints ({', '.join(mech.locked_joints)}) may not be the "
+                    f'ones to lock: a joint with a small share of an idle spin barely holds it '
+                    f'(without mechanism.locked_joints the load names each spin and its '
+                    f'shares)')
         if mech.assembly_warnings and not hint:
             hint = ('; the assembly also had to move joints far from initial_positions ('
                     'see assembly_warnings): most likely the geometry (xyz, rpy, axis) or '

@@ -278,3 +278,14 @@ def test_torque_weights_say_the_redundancy_is_meant():
     p = four_bar(active=('joint1', 'joint3'), init=[1.2, -1.2, 1.2, 1.2])
     mech = load(p, **{'mechanism.torque_weights': [1.0, 1.0]})
     assert mech.is_redundant and mech.assembly_warnings == []
+
+
+def test_inspect_shows_the_locked_joints():
+    from cog_id_ros.offline.inspect_pose import joint_rows
+    from cog_id_ros.offline.inspect_structure import format_actuation
+    mech = load(delta_3rss(), **{'mechanism.locked_joints': ELBOW_LOCKS})
+    text = '\n'.join(format_actuation(mech))
+    assert 'closure rank 36, 6 of it the locked joints' in text, text
+    assert f"locked joints (held at their initial positions): {', '.join(ELBOW_LOCKS)}" in text
+    roles = {row[0]: row[2] for row in joint_rows(mech)}
+    assert [name for name, role in roles.items() if role == 'locked'] == ELBOW_LOCKS
