@@ -12,6 +12,7 @@ fail raises MechanismConfigError with what to change.
 """
 import itertools
 import math
+from typing import Any
 
 import numpy as np
 
@@ -91,7 +92,7 @@ def primary_actuators(mech, matrix, dof):
     return list(best)
 
 
-def report_dependent(mech, matrix):
+def report_dependent(mech: Any, matrix: np.ndarray) -> None:
     """An assembly warning naming the actuators that do not move independently, when the
     mechanism is redundant and ``mechanism.torque_weights`` does not say that is meant."""
     if not mech.is_redundant or mech.weights_given:

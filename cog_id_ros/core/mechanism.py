@@ -71,6 +71,12 @@ NAME_PATTERN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*\Z')
 class Mechanism:
     """Links, joints and actuators of a (closed-link) mechanism; see docs/mechanism.md."""
 
+    #: read by idle_spins.read_locks: the joints held at their initial positions (names,
+    #: and indices into ``joints``; idle_spins: lock adds its own), and mechanism.idle_spins
+    locked_joints: list
+    locked_index: list
+    idle_spins: str
+
     def __init__(self, params, _chains=()):
         reader = ParameterReader(params)
         self.parameters = dict(reader.params)
@@ -353,7 +359,7 @@ class Mechanism:
                 for row in np.atleast_2d(positions)]
         return np.array(rows[0] if positions.ndim == 1 else rows)
 
-    def _analyse(self):
+    def _analyse(self) -> np.ndarray:
         """Assembly and the degrees of freedom (assembly.py, degrees_of_freedom.py); with
         ``idle_spins: lock``, once more with the joints that take out the idle spins
         locked (idle_spins.py). The closure Jacobian at the assembled pose."""
