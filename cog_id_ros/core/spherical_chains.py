@@ -248,9 +248,12 @@ def _rotation(e1, e2, e3, angles):
 def chain_turn(chain, rot_p, rot_c):
     """T = frame_p^T R_P^T R_C frame_c from the link rotations of P and C (9-tuples of
     lanes, base frame; None for the base link)."""
-    relative = sp.mat_mat(sp.transpose(rot_p), rot_c) if rot_p is not None else rot_c
-    if relative is None:
-        relative = sp.IDENTITY
+    if rot_p is None:
+        relative = sp.IDENTITY if rot_c is None else rot_c
+    elif rot_c is None:                    # C is the base link
+        relative = sp.transpose(rot_p)
+    else:
+        relative = sp.mat_mat(sp.transpose(rot_p), rot_c)
     return sp.mat_mat(sp.mat_mat(sp.transpose(chain.frame_p), relative), chain.frame_c)
 
 
