@@ -86,7 +86,7 @@ class Player(Node):
         while (left := end - time.monotonic()) > 0:
             self._spinner.spin_once(timeout_sec=left)
 
-    def wait_for_node(self, timeout=10.0):
+    def wait_for_subscriber(self, timeout=10.0):
         """Wait until the setpoint topic has a matched subscriber."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
@@ -241,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if stop.hand_over(restore_python_handlers=True) is not None:
             return 130
-        if not player.wait_for_node(args.wait):
+        if not player.wait_for_subscriber(args.wait):
             print(f'cog_id_player: nothing subscribes to {player.publisher.topic_name} '
                   f'after {args.wait:g} s (is cog_id_node running, in this namespace and '
                   'ROS_DOMAIN_ID?)', file=sys.stderr)
