@@ -12,7 +12,7 @@ import os
 import re
 import sys
 import tempfile
-from typing import Any, Sequence
+from typing import Any, Literal, Sequence
 
 import yaml
 
@@ -39,7 +39,9 @@ def wants_help(argv: Sequence[str]) -> bool:
 def split_ros_arguments(argv: Sequence[str]) -> tuple[list[str], list[str]]:
     """(ROS arguments, the others): the ROS ones are those after a ``--ros-args`` up to
     the next ``--`` or the end (rcl's rule; there may be several such sections)."""
-    ros, other, inside = [], [], False
+    ros: list[str] = []
+    other: list[str] = []
+    inside = False
     for arg in argv:
         if arg == '--ros-args':
             inside = True
@@ -171,7 +173,7 @@ class StderrHeld:
             self._saved = None
         return self
 
-    def __exit__(self, *exc_info: Any) -> bool:
+    def __exit__(self, *exc_info: Any) -> Literal[False]:
         if self._saved is not None:
             os.dup2(self._saved, 2)
             os.close(self._saved)
