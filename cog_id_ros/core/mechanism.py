@@ -63,9 +63,11 @@ MAX_LOOPS = 40
 MAX_ACTIVE_JOINTS = 100
 MAX_JACOBIAN_COLUMNS = 5000   # links x active joints
 
-#: names of links and joints become components of ROS 2 parameter names
-#: (``links.<link>.mass``): letters, digits and '_', not starting with a digit
-NAME_PATTERN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*\Z')
+#: what no name of a link or joint may hold: control characters (a line break would split a
+#: log line, a CSV row or a parameter file's key). Anything else is a name, as URDF exporters
+#: write them ('/', a leading digit, '.', spaces, non-ASCII letters): ROS 2 parameter files
+#: hold such keys (``links.<name>.mass``), and outputs carry the names unchanged
+NAME_REFUSED = re.compile(r'[\x00-\x1f\x7f-\x9f]')
 
 
 class Mechanism:
@@ -285,17 +287,18 @@ class Mechanism:
         for group, names, keys in (('links', self.links, LINK_KEYS),
                                    ('joints', self.declared_joints, joint_keys)):
             for name in r.unused(group + '.'):
-                parts = name.split('.')
-                if len(parts) < 3 or parts[1] not in names:
+                owner, key = split_owner(name[len(group) + 1:], names)
+                if owner is None:
                     raise MechanismConfigError(
-                        name, f"unknown {group[:-1]} '{parts[1]}' (not in mechanism.{group})")
-                kind = kinds.get(parts[1]) if group == 'joints' else None
-                why = kind.refused.get(parts[2]) if kind is not None else None
+                        name, f"unknown {group[:-1]} '{key.split('.')[0]}' (not in "
+                              f"mechanism.{group})")
+                kind = kinds.get(owner) if group == 'joints' else None
+                why = kind.refused.get(key) if kind is not None else None
                 if why:
                     raise MechanismConfigError(name, f'not a parameter of a {kind.name} joint: '
                                                      f'a {kind.name} joint {why}')
                 raise MechanismConfigError(
-                    name, f"unknown parameter ({group}.{parts[1]}.* takes {', '.join(keys)})")
+                    name, f"unknown parameter ({group}.{owner}.* takes {', '.join(keys)})")
 
     # --- after reading: the solver form, the assembled pose, the actuators ------------------
 
@@ -377,6 +380,13 @@ class Mechanism:
                 f'{len(self.model.loops)} loops, {self.dof} DOF, active {self.active_joints})')
 
 
+def split_owner(rest: str, names: list) -> tuple:
+    """(name, key) of ``<name>.<key>``, the rest of a ``links.*`` or ``joints.*`` parameter,
+    for the longest of ``names`` it starts with (names may hold '.'); (None, rest) if none."""
+    owner = max((n for n in names if rest.startswith(n + '.')), key=len, default=None)
+    return (owner, rest[len(owner) + 1:]) if owner is not None else (None, rest)
+
+
 def _inertia(r, name):
     values = r.vector(name, default=(0.0,) * 6)
     if len(values) not in (6, 9):
@@ -452,24 +462,18 @@ def _check_sizes(links, joints, active):
             f'size limits)')
 
 
+def name_problem(name: str) -> 'str | None':
+    """Why ``name`` cannot name a link or joint (a control character in it), or None."""
+    found = NAME_REFUSED.search(name)
+    if found is None:
+        return None
+    return (f'holds the control character U+{ord(found.group()):04X} at index '
+            f'{found.start()}, which would split log lines, CSV rows and parameter keys')
+
+
 def _check_names(parameter, kind, names):
-    """Names of links and joints are parts of ROS 2 parameter names: letters, digits, '_'."""
+    """Any name but one with a control character (NAME_REFUSED)."""
     for name in names:
-        if NAME_PATTERN.match(name):
-            continue
-        fixed = re.sub(r'[^A-Za-z0-9_]', '_', name)
-        if fixed[:1].isdigit():
-            fixed = f'{kind}_{fixed}'
-        if '.' in name:
-            why = (f"contains '.', which ROS 2 reads as a separator of parameter names "
-                   f"('{parameter.split('.')[1]}.{name}.*' is ambiguous)")
-        elif name[:1].isdigit():
-            why = 'starts with a digit, which a ROS 2 parameter name component must not'
-        else:
-            bad = sorted({c for c in name if not (c.isascii() and (c.isalnum() or c == '_'))})
-            why = f"contains {', '.join(repr(c) for c in bad)}"
-        raise MechanismConfigError(
-            parameter,
-            f"{kind} name '{name}' {why}; names of links and joints become parts of ROS 2 "
-            f"parameter names ({parameter.split('.')[1]}.<name>.*) and may hold only letters, "
-            f"digits and '_', not starting with a digit: use '_' instead, e.g. '{fixed}'")
+        problem = name_problem(name)
+        if problem:
+            raise MechanismConfigError(parameter, f'{kind} name {name!r} {problem}; remove it')
