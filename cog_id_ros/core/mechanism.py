@@ -26,7 +26,7 @@ from . import assembly, closure, degrees_of_freedom, joints, spherical_chains
 from .assembly import AssemblyWarning
 from .errors import MechanismConfigError
 from .kinematics import BASE, JointSpec, KinematicModel
-from .parameters import ParameterReader
+from .parameters import ParameterReader, split_owner
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
@@ -378,13 +378,6 @@ class Mechanism:
     def __repr__(self):
         return (f'Mechanism({self.name!r}: {len(self.links)} links, {len(self.joints)} joints, '
                 f'{len(self.model.loops)} loops, {self.dof} DOF, active {self.active_joints})')
-
-
-def split_owner(rest: str, names: list) -> tuple:
-    """(name, key) of ``<name>.<key>``, the rest of a ``links.*`` or ``joints.*`` parameter,
-    for the longest of ``names`` it starts with (names may hold '.'); (None, rest) if none."""
-    owner = max((n for n in names if rest.startswith(n + '.')), key=len, default=None)
-    return (owner, rest[len(owner) + 1:]) if owner is not None else (None, rest)
 
 
 def _inertia(r, name):

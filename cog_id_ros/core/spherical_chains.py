@@ -45,6 +45,7 @@ import numpy as np
 from . import kinematics as kin
 from . import spatial as sp
 from .joints import Revolute, Spherical
+from .parameters import split_owner
 from .pipeline import massless
 
 #: cosine below which two axes count as perpendicular, and the distance (times the
@@ -199,9 +200,12 @@ def solver_parameters(params, chains, joints, positions):
     revolute and prismatic ones) without the chains' entries."""
     links = {h for chain in chains for h in chain.helpers}
     chain_of = {j: chain for chain in chains for j in chain.joints}
+    # (names may hold '.': a key's owner is the longest name it starts with)
     out = {key: value for key, value in params.items()
-           if not (key.startswith('links.') and key.split('.')[1] in links or
-                   key.startswith('joints.') and key.split('.')[1] in chain_of)}
+           if not (key.startswith('links.') and split_owner(
+                       key[len('links.'):], params['mechanism.links'])[0] in links or
+                   key.startswith('joints.') and split_owner(
+                       key[len('joints.'):], params['mechanism.joints'])[0] in chain_of)}
     out['mechanism.links'] = [name for name in params['mechanism.links'] if name not in links]
     out['mechanism.joints'] = [chain_of[name].name if name in chain_of else name
                                for name in params['mechanism.joints']

@@ -6,8 +6,8 @@ import math
 from ..core import joints
 from ..core.errors import MechanismConfigError
 from ..core.joints import AXES_PERPENDICULAR
-from ..core.mechanism import MAX_COORDINATE, MAX_LENGTH, bounded, name_problem, split_owner
-from ..core.parameters import show
+from ..core.mechanism import MAX_COORDINATE, MAX_LENGTH, bounded, name_problem
+from ..core.parameters import show, split_owner
 from .frames import ZERO
 
 #: the keys of ``loop_closures.<name>.*``
