@@ -193,7 +193,11 @@ def _active(r, robot, closures, loop_file, out):
     """Check the active joints: ``mechanism.active_joints``, else the file's ``name_mot``
     (then written to ``out``)."""
     active = r.string_list('mechanism.active_joints')
-    if active is not None or loop_file is None or loop_file.motors is None:
+    if active is None and loop_file is not None and not loop_file.motors:
+        raise MechanismConfigError(
+            'mechanism.active_joints', f'missing: give it, or the actuated joints as name_mot '
+                                       f'in {LOOP_FILE} ({loop_file.path})')
+    if active is not None or loop_file is None:
         _check_active(active or (), robot, closures,
                       lambda k, message: MechanismConfigError('mechanism.active_joints',
                                                               message))
