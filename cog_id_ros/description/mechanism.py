@@ -26,6 +26,7 @@ from ..core.errors import MechanismConfigError
 from ..core.parameters import ParameterReader
 from . import urdf
 from .params_file import DEFAULT_NODE_NAME, load_params_file
+from .urdf_messages import for_urdf_user
 
 
 def native_form(params: dict, base_dir: 'str | dict | None' = None) -> dict:
@@ -61,7 +62,13 @@ class Mechanism(core.Mechanism):
         (file formats live outside the core); ``base_dir`` is where a relative
         ``mechanism.urdf_file`` or ``mechanism.loop_closure_file`` is looked for (default:
         the working directory; a dict: the directory of each)."""
-        return cls(native_form(params, base_dir))
+        if not isinstance(params, dict) or not urdf.is_urdf(ParameterReader(params).params):
+            return cls(native_form(params, base_dir))
+        native, sources = urdf.read(params, base_dir)
+        try:
+            return cls(native)
+        except MechanismConfigError as exc:     # said in the terms of the URDF form
+            raise for_urdf_user(exc, native, sources) from None
 
     @classmethod
     def from_params_file(cls, path: 'str | os.PathLike', node_name: str = DEFAULT_NODE_NAME

@@ -66,6 +66,14 @@ def native_parameters(params: dict, base_dir: 'str | dict | None' = None) -> dic
     (``name``, ``gravity``, ``active_joints``, ``torque_weights``, the tolerances), and so
     does every parameter outside the mechanism's (a node's own). Raises
     MechanismConfigError naming the parameter."""
+    return read(params, base_dir)[0]
+
+
+def read(params: dict, base_dir: 'str | dict | None' = None) -> tuple:
+    """(native parameters, sources): :func:`native_parameters`, and where each of its
+    names was written, for :func:`.urdf_messages.for_urdf_user`: the URDF parameter
+    (``source``), the URDF line of each joint and link (``lines``) and the loop closures by
+    name (``closures``)."""
     if not isinstance(params, dict):
         raise MechanismConfigError('parameters', f'must be a dict, got {type(params).__name__}')
     r = ParameterReader(params)
@@ -95,7 +103,11 @@ def native_parameters(params: dict, base_dir: 'str | dict | None' = None) -> dic
         closures += file_closures(robot, loop_file, frames, taken)
     base = _choose_base(r, robot)
     bodies = merge_fixed(robot, base)
-    return _native(r, robot, closures, base, bodies, loop_file)
+    lines = {name: link.line for name, link in robot.links.items()}
+    lines.update({name: joint.line for name, joint in robot.joints.items()})
+    sources = {'source': source.parameter, 'lines': lines,
+               'closures': {closure.name: closure for closure in closures}}
+    return _native(r, robot, closures, base, bodies, loop_file), sources
 
 
 def _directory(base_dir, parameter):

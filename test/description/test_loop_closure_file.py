@@ -246,3 +246,47 @@ def test_the_file_must_exist_and_needs_a_urdf(tmp_path):
 def test_without_name_mot_or_active_joints_the_message_says_where_to_give_them(tmp_path):
     err = error_with(tmp_path, "closed_loop: [['1/tip', '2/tip']]\ntype: ['3d']\n")
     assert err.parameter == 'mechanism.active_joints' and 'name_mot' in str(err)
+
+
+# --- refusals of the core, in the terms of the URDF form --------------------------------------
+
+KNEE_BALL = ("closed_loop: [['fermeture1_A', 'fermeture1_B']]\ntype: ['3d']\n"
+             "name_mot: ['moteur_genou']\n")
+
+
+def test_refusals_tell_a_urdf_user_what_to_write_and_a_native_user_theirs(tmp_path):
+    """The knee closed by a ball ('3d') instead of a weld has a freedom its motor does not
+    drive: a URDF user is told of universal loop closures and UJOINT edits (a URDF joint
+    cannot be universal), a user of the native schema of `type: universal`."""
+    err = error_with(tmp_path, KNEE_BALL, 'knee')
+    assert err.parameter == 'mechanism.active_joints'
+    assert 'loop_closures.<name>.type: universal' in str(err) and 'UJOINT_<A><B>' in str(err)
+    assert '`type: universal`' not in str(err) and '`type: spherical`' not in str(err)
+    native = native_parameters({'mechanism.urdf_file': 'robot.urdf',
+                                'mechanism.loop_closure_file': str(tmp_path / 'robot.yaml')},
+                               os.path.join(MODELS, 'knee'))
+    with pytest.raises(MechanismConfigError) as info:
+        Mechanism.from_parameters(native)
+    assert info.value.parameter == 'mechanism.active_joints'
+    assert '`type: universal`' in str(info.value) and 'UJOINT' not in str(info.value)
+
+
+def test_a_rigid_urdf_names_the_urdf_and_its_origins_and_axes(tmp_path):
+    loops = ("closed_loop: [['weld_a', 'coupler_end']]\ntype: ['6d']\nname_mot: ['crank_motor']\n"
+             "joint_name: ['ball', 'cardan', 'cw_hinge']\n"
+             "joint_type: ['SPHERICAL', 'FIXED', 'FIXED']\n")
+    err = error_with(tmp_path, loops, 'rsur')
+    assert err.parameter == 'mechanism.urdf_file' and 'rigid' in str(err)
+    assert "URDF joint's <origin> and <axis>" in str(err)
+    assert 'check the geometry (parent_xyz' not in str(err)
+
+
+def test_loops_that_cannot_close_and_positions_out_of_bounds_name_the_urdf_terms(tmp_path):
+    loops = ("closed_loop: [['fermeture1_A', 'manivelle']]\ntype: ['6d']\n"
+             "name_mot: ['moteur_genou']\n")
+    err = error_with(tmp_path, loops, 'knee')
+    assert err.parameter == 'mechanism.initial_positions' and '<origin>' in str(err)
+    with pytest.raises(MechanismConfigError) as info:
+        load('five_bar', initial_positions={'elbow/2': 1e9})
+    assert info.value.parameter == 'mechanism.initial_positions.elbow/2'
+    assert 'index' not in str(info.value)
