@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from . import assembly, closure, degrees_of_freedom, joints, spherical_chains
+from . import assembly, closure, degrees_of_freedom, idle_spins, joints, spherical_chains
 from .assembly import AssemblyWarning
 from .errors import MechanismConfigError
 from .kinematics import BASE, JointSpec, KinematicModel
@@ -30,7 +30,7 @@ from .parameters import ParameterReader, split_owner
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
-                  'max_condition_number', 'closure_tolerance')
+                  'max_condition_number', 'closure_tolerance', 'locked_joints', 'idle_spins')
 LINK_KEYS = ('mass', 'com', 'inertia')
 JOINT_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy',
               'axis', 'axis2', 'lower', 'upper', 'effort')
@@ -84,6 +84,7 @@ class Mechanism:
         self._read_links(reader)
         self._read_joints(reader)
         self._read_positions(reader)
+        idle_spins.read_locks(self, reader)
         self._reject_unknown(reader)
         self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs)
         #: the solver's coordinates: the joints (mechanism.joints), then the hidden ones of
@@ -95,10 +96,9 @@ class Mechanism:
         self.link_index = {name: k for k, name in enumerate(self.links)}
         self.active_index = [self.joint_index[name] for name in self.active_joints]
         try:
-            q, moved, problem = assembly.assemble(self)
-            self._assembled(q)
-            matrix, self.closure_rank, self.dof = degrees_of_freedom.count(self, moved, problem)
+            matrix = self._analyse()
             self._actuated(degrees_of_freedom.primary_actuators(self, matrix, self.dof))
+            degrees_of_freedom.report_dependent(self, matrix)
         except (np.linalg.LinAlgError, ArithmeticError, FloatingPointError) as exc:
             raise MechanismConfigError(
                 'mechanism.initial_positions',
@@ -148,6 +148,8 @@ class Mechanism:
                 'mechanism.gravity', f'must be at most {MAX_GRAVITY:g} m/s^2 long, got '
                                      f'{list(self.gravity)} ({gravity_norm:.6g} m/s^2)')
         m = len(self.active_joints)
+        #: torque_weights written: a redundancy is meant (degrees_of_freedom.report_dependent)
+        self.weights_given = r.has('mechanism.torque_weights')
         self.torque_weights = r.vector('mechanism.torque_weights', m, default=(1.0,) * m)
         for k, w in enumerate(self.torque_weights):
             if w <= 0.0:
@@ -315,6 +317,9 @@ class Mechanism:
             return
         params = spherical_chains.solver_parameters(self.parameters, chains, self.joints,
                                                     self.assembled_positions)
+        params.pop('mechanism.idle_spins', None)         # the spins are locked already
+        if self.locked_joints:
+            params['mechanism.locked_joints'] = list(self.locked_joints)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter('ignore', AssemblyWarning)
@@ -351,6 +356,27 @@ class Mechanism:
                 for row in np.atleast_2d(positions)]
         return np.array(rows[0] if positions.ndim == 1 else rows)
 
+    def _analyse(self):
+        """Assembly and the degrees of freedom (assembly.py, degrees_of_freedom.py); with
+        ``idle_spins: lock``, once more with the joints that take out the idle spins
+        locked (idle_spins.py). The closure Jacobian at the assembled pose."""
+        #: True once idle_spins: lock has locked joints of its own choice
+        self.spins_locked, notes = False, []
+        while True:
+            q, moved, problem = assembly.assemble(self)
+            self._assembled(q)
+            try:
+                matrix, self.closure_rank, self.dof = degrees_of_freedom.count(
+                    self, moved, problem)
+            except idle_spins.LockThem as lock:
+                self.spins_locked, notes = True, lock.notes
+                self.locked_joints = self.locked_joints + [self.joints[j] for j in lock.joints]
+                self.locked_index = sorted(self.locked_index + lock.joints)
+                continue
+            for text in notes:
+                assembly.note(self, text)
+            return matrix
+
     def _assembled(self, q):
         #: every coordinate of the solver at the assembled pose (hidden ones included)
         self.assembled_coordinates = tuple(q)
@@ -362,7 +388,8 @@ class Mechanism:
         self.primary_joints = [self.active_index[i] for i in self.primary]
         #: (index into active_joints, joint index) of each primary actuator
         self.primary_pairs = list(zip(self.primary, self.primary_joints))
-        fixed = set(self.primary_joints)
+        fixed = set(self.primary_joints) | set(self.locked_index)
+        #: the coordinates solved for: all but the primary actuators and the locked joints
         self.free_joints = [j for j in range(self.n_coordinates) if j not in fixed]
         self.inverse_torque_weights = [1.0 / w for w in self.torque_weights]
 

@@ -10,7 +10,7 @@ torques are the same (the helper links carry no mass); the work is about half.
 
 A chain P -j1- a -j2- b -j3- C qualifies when:
 
-* j1, j2, j3 are revolute and passive (not in active_joints);
+* j1, j2, j3 are revolute and passive (not in active_joints, not locked);
 * a and b have zero mass and inertia and no joint but these;
 * consecutive axes meet at right angles in one point: j1 and j2 in link a, j2 and j3 in
   link b, at the same point of j2's axis;
@@ -84,7 +84,8 @@ def chains_of(mechanism, near_lock=False):
     return find_chains(
         m.links, m.base_link,
         [massless(mass, inertia) for mass, inertia in zip(m.link_mass, m.link_inertia)],
-        m.joint_specs, m.closure_specs, set(m.active_joints), m.assembled_positions,
+        m.joint_specs, m.closure_specs, set(m.active_joints) | set(m.locked_joints),
+        m.assembled_positions,
         max(1.0, m.attachment_scale), near_lock)
 
 
