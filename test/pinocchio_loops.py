@@ -84,9 +84,12 @@ class LoopOracle:
 
     def configuration(self, positions):
         """Pinocchio's q with the one-coordinate joints of ``positions`` (name -> value) set
-        and the others (spherical joints) at their neutral configuration."""
+        and the others (spherical joints) at their neutral configuration; joints this model
+        locked (FIXED) are left out."""
         q = pin.neutral(self.model)
         for name, value in positions.items():
+            if not self.model.existJointName(name):     # locked here (a FIXED edit)
+                continue
             joint = self.model.joints[self.model.getJointId(name)]
             assert joint.nq == 1, name
             q[joint.idx_q] = value

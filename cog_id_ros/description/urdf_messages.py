@@ -19,9 +19,11 @@ _ADVICE = (
      "check the geometry (each URDF joint's <origin> and <axis>; each loop closure's "
      'parent_xyz, child_xyz, *_rpy and axis, or the frames mechanism.loop_closure_file '
      'pairs)'),
-    (re.compile(r'so write one of them as `type: universal`'),
-     'so make one of them universal: a URDF joint cannot be, but a loop closure can '
-     '(loop_closures.<name>.type: universal), and so can a URDF joint edited by '
+    (re.compile(r'write one of them as `type: universal`(?: \(with `axis` and `axis2` '
+                r'perpendicular to the line through the two centres\))?'),
+     'make one of them universal: a URDF joint cannot be, but a loop closure can '
+     '(loop_closures.<name>.type: universal, its axis and axis2 perpendicular to the line '
+     'through the two centres), and so can a URDF joint edited by '
      'mechanism.loop_closure_file (joint_type UJOINT_<A><B>)'),
     (re.compile(r'write it as `type: spherical`'),
      'make it one spherical joint (a spherical loop closure, or joint_type SPHERICAL for '
