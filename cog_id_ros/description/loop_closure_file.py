@@ -81,13 +81,13 @@ class LoopFile:
         where = key if index is None else f'{key} entry {index + 1}'
         return MechanismConfigError(PARAMETER, f'{self.path}: {where}: {message}')
 
-    def _list(self, data, key):
+    def _list(self, data: dict, key: str) -> list:
         value = data.get(key, [])
         if not isinstance(value, list):
             raise self.error(key, None, f'must be a list, got {show(value)}')
         return value
 
-    def _names(self, data, key):
+    def _names(self, data: dict, key: str) -> list:
         names = self._list(data, key)
         for k, name in enumerate(names):
             if not isinstance(name, str) or not name:
@@ -96,12 +96,12 @@ class LoopFile:
                 raise self.error(key, k, f'{name!r} is listed twice')
         return names
 
-    def _same_length(self, key, items, other, others):
+    def _same_length(self, key: str, items: list, other: str, others: list) -> None:
         if len(items) != len(others):
             raise self.error(other, None, f'has {len(others)} entries, {key} has '
                                           f'{len(items)}: one per entry of {key}')
 
-    def _edit(self, k, edit):
+    def _edit(self, k: int, edit: object) -> str:
         text = edit.upper() if isinstance(edit, str) else None
         if text in JOINT_EDITS:
             return text
@@ -183,7 +183,7 @@ def apply_edits(robot, loop_file: LoopFile) -> None:
         robot.children[joint.parent].append(joint)
 
 
-def _split(robot, joint, names, axes):
+def _split(robot, joint, names: tuple, axes: tuple) -> None:
     """Joint ``joint`` of ``robot`` as two revolute joints through a massless link: the
     first at the joint's origin, the second at the first's child frame."""
     first, second, cross = names
@@ -218,10 +218,18 @@ def file_closures(robot, loop_file: LoopFile, frames: dict, taken: set) -> list:
                 raise loop_file.error('closed_loop', k, f'{frame!r} is neither a link nor a '
                                                         f'joint of the URDF')
             ends.append(frames[frame])
-        offsets = (ZERO, ZERO, ZERO, ZERO)
-        closure = Closure(name, kind, ends[0], ends[1], offsets, None, None)
-        entry = [frame_a, frame_b]
-        closure.error = lambda _key, message, k=k, entry=entry: loop_file.error(
-            'closed_loop', k, f'{entry}: {message}')
-        closures.append(closure)
+        closures.append(_FileClosure(name, kind, ends, loop_file, k, [frame_a, frame_b]))
     return closures
+
+
+class _FileClosure(Closure):
+    """A closure of a frame pair: both frames are link frames (no offsets, no axes); its
+    errors name the file and the entry."""
+
+    def __init__(self, name: str, kind: str, ends: list, loop_file: LoopFile, index: int,
+                 entry: list) -> None:
+        super().__init__(name, kind, ends[0], ends[1], (ZERO, ZERO, ZERO, ZERO), None, None)
+        self.loop_file, self.index, self.entry = loop_file, index, entry
+
+    def error(self, key: str, message: str) -> MechanismConfigError:
+        return self.loop_file.error('closed_loop', self.index, f'{self.entry}: {message}')

@@ -24,7 +24,7 @@ class Closure:
         self.offsets = offsets           # parent_xyz, parent_rpy, child_xyz, child_rpy
         self.axis, self.axis2 = axis, axis2
 
-    def error(self, key, message):
+    def error(self, key: str, message: str) -> MechanismConfigError:
         """The error about its ``key``, naming where it was given (a loop-closure file's
         closures name the file and the entry instead)."""
         return MechanismConfigError(f'loop_closures.{self.name}.{key}', message)

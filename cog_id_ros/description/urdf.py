@@ -110,7 +110,7 @@ def read(params: dict, base_dir: 'str | dict | None' = None) -> tuple:
     return _native(r, robot, closures, base, bodies, loop_file), sources
 
 
-def _directory(base_dir, parameter):
+def _directory(base_dir: 'str | dict | None', parameter: str) -> 'str | None':
     return base_dir.get(parameter) if isinstance(base_dir, dict) else base_dir
 
 
@@ -201,7 +201,7 @@ def _check_name(robot, item, kind):
                                      f'URDF')
 
 
-def _active(r, robot, closures, loop_file, out):
+def _active(r: ParameterReader, robot: Robot, closures: list, loop_file, out: dict) -> None:
     """Check the active joints: ``mechanism.active_joints``, else the file's ``name_mot``
     (then written to ``out``)."""
     active = r.string_list('mechanism.active_joints')
@@ -219,7 +219,7 @@ def _active(r, robot, closures, loop_file, out):
     out['mechanism.active_joints'] = list(loop_file.motors)
 
 
-def _check_active(active, robot, closures, error):
+def _check_active(active: list, robot: Robot, closures: list, error) -> None:
     kinds = {c.name: c.kind for c in closures}
     for k, name in enumerate(active):
         joint = robot.joints.get(name)
@@ -239,7 +239,7 @@ def _check_active(active, robot, closures, error):
                            f'mechanism.loop_closures' + _edited(robot, name))
 
 
-def _edited(robot, name):
+def _edited(robot: Robot, name: str) -> str:
     """Where a joint name the URDF had went: the two joints of its UJOINT edit."""
     split = robot.renamed.get(name)
     return f" (the UJOINT edit of {LOOP_FILE} made it {' and '.join(split)})" if split else ''

@@ -58,13 +58,13 @@ def for_urdf_user(error: MechanismConfigError, native: dict, sources: dict
     return MechanismConfigError(parameter or error.parameter, message)
 
 
-def _coordinates(native):
+def _coordinates(native: dict) -> list:
     """The joints with a coordinate, in the order of the native initial_positions."""
     return [name for name in native['mechanism.joints']
             if joints.kind(native[f'joints.{name}.type']).has_coordinate]
 
 
-def _owner(parameter, native):
+def _owner(parameter: str, native: dict) -> tuple:
     for group, names in (('joints.', native.get('mechanism.joints', [])),
                          ('links.', native.get('mechanism.links', []))):
         if parameter.startswith(group):
@@ -72,7 +72,7 @@ def _owner(parameter, native):
     return None, None
 
 
-def _where(parameter, native, sources):
+def _where(parameter: str, native: dict, sources: dict) -> tuple:
     """(parameter to name, or None for a closure's own; what in it, or '')."""
     source = sources['source']
     if parameter == 'mechanism.joints' or parameter == 'mechanism.links':
