@@ -535,3 +535,27 @@ def test_a_closure_tolerance_no_double_can_meet_is_refused():
     params = with_changes(from_yaml(PAPER_A), mechanism__closure_tolerance=5e-324)
     with pytest.raises(cog_id_ros.MechanismConfigError, match='at least 1e-14'):
         cog_id_ros.Mechanism.from_parameters(params)
+
+
+def test_a_dotted_name_keying_a_mapping_is_written_flat(tmp_path):
+    """Issue 23: rcl files the keys after a mapping whose key holds '.' under a wrong name
+    (links: {"link.one": {...}, link2: ...} gives links.link.link2.*; checked with rcl,
+    Jazzy), so a parameter file with one is refused naming the key and the escape, flat
+    quoted keys, which load; a dotted name as the last part of a key is fine."""
+    from cog_id_ros.description.params_file import load_params_file
+    base = ('/**:\n  ros__parameters:\n    mechanism:\n      initial_positions: {"a.b": 1.0, c: 2.0}\n'
+            '    links:\n')
+    nested = tmp_path / 'nested.yaml'
+    nested.write_text(base + '      "link.one": {mass: 1.0}\n      link2: {mass: 2.0}\n')
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        load_params_file(str(nested))
+    assert info.value.parameter == 'links.link.one'
+    assert "'links.link.link2'" in str(info.value) and '"link.one.mass"' in str(info.value)
+    flat = tmp_path / 'flat.yaml'
+    flat.write_text(base + '      "link.one.mass": 1.0\n      link2: {mass: 2.0}\n')
+    params = load_params_file(str(flat))
+    assert params['links.link.one.mass'] == 1.0 and params['links.link2.mass'] == 2.0
+    assert params['mechanism.initial_positions.a.b'] == 1.0
+    last = tmp_path / 'last.yaml'       # nothing follows it: rcl reads it right
+    last.write_text(base + '      link2: {mass: 2.0}\n      "link.one": {mass: 1.0}\n')
+    assert load_params_file(str(last))['links.link.one.mass'] == 1.0
