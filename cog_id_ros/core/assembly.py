@@ -1,9 +1,10 @@
 """Assembly at load: the mechanism's loops closed near ``initial_positions``, what closing
 them moved, and which loops to check when they do not close.
 
-The loops are closed with the actuators held at their initial positions (Gauss-Newton on
-the closure equations, closure.assemble); failing that (e.g. rounded redundant initial
-positions), with every joint free, but a move of an actuator by more than
+The loops are closed with the actuators (and the locked joints, idle_spins.py) held at
+their initial positions (Gauss-Newton on the closure equations, closure.assemble); failing
+that (e.g. rounded redundant initial positions), with every joint but the locked ones
+free, but a move of an actuator by more than
 setpoint_tolerance is refused. What the assembly had to change is reported in
 ``Mechanism.assembly_warnings`` and as AssemblyWarning.
 """
@@ -37,10 +38,11 @@ def assemble(mech: MechanismLike) -> tuple[list[float], str | None, MechanismCon
     start = spherical_chains.with_chain_starts(
         mech, mech.model.start(mech.initial_positions))
     q, residual, ok = closure.assemble(mech.model, start, mech.closure_tolerance,
-                                       fixed=mech.active_index)
+                                       fixed=mech.active_index + mech.locked_index)
     if not ok:
         held_q, held_residual = q, residual
-        q, residual, ok = closure.assemble(mech.model, start, mech.closure_tolerance)
+        q, residual, ok = closure.assemble(mech.model, start, mech.closure_tolerance,
+                                           fixed=mech.locked_index)
         if not ok:
             raise MechanismConfigError(
                 'mechanism.initial_positions',
@@ -88,7 +90,7 @@ def attachment_scale(specs: Sequence[kin.JointSpec]) -> float:
 
 def _report_far_moves(mech: MechanismLike, start: Sequence[float], q: Sequence[float]) -> None:
     """A note for every passive joint the assembly moved far from initial_positions."""
-    held = set(mech.active_index)
+    held = set(mech.active_index) | set(mech.locked_index)
     far: list[str] = []
     moved: list[int] = []
     for j, (a, b) in enumerate(zip(start[:len(mech.joints)], q)):

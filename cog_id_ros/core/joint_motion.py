@@ -27,14 +27,16 @@ Matrix = Sequence[Sequence[Lane]]
 
 class BasisLayout:
     """How V is made of its rows: the free joints' rows (-T, as the lane code solves them or
-    a dynamics record returns them: kernels.PoseRecord.basis) and the primary actuators'
-    unit rows (I). The one place that puts them together, for one sample as a list over
+    a dynamics record returns them: kernels.PoseRecord.basis), the primary actuators'
+    unit rows (I) and the locked joints' zero rows (idle_spins.py: they do not move). The
+    one place that puts them together, for one sample as a list over
     joints (what the lane code and the kernels take) or as arrays."""
 
     def __init__(self, mechanism: MechanismLike) -> None:
         m = mechanism
         self.free = m.free_joints
         self.shape = (m.n_coordinates, m.dof)
+        self.zero_row = [0.0] * m.dof
         #: (joint, its row) of every primary actuator: constant, shared by every V made here
         self.unit_rows = [(j, [1.0 if i == k else 0.0 for i in range(m.dof)])
                           for k, j in enumerate(m.primary_joints)]
@@ -42,7 +44,7 @@ class BasisLayout:
     def rows(self, free_rows: Sequence[list[Lane]]) -> LaneMatrix:
         """V (a list over joints of rows over the primary actuators) from the rows of the
         free joints, in mechanism.free_joints order."""
-        rows: list[Any] = [None] * self.shape[0]
+        rows = [self.zero_row] * self.shape[0]     # the locked joints' rows stay zero
         for j, row in self.unit_rows:
             rows[j] = row
         for j, row in zip(self.free, free_rows):

@@ -106,6 +106,9 @@ class JointKind:
     wraps = False
     #: its two attachment origins stay together whatever its coordinates (a joint centre)
     origins_coincide = True
+    #: a ball joint: its child turns any way about the centre (a rod between two of them
+    #: can spin about its own axis, idle_spins.py)
+    turns_freely = False
     #: keys it reads beyond those of every joint; why it refuses the others' keys
     parameters: tuple[str, ...] = ()
     refused: dict[str, str] = {}
@@ -433,6 +436,7 @@ class Spherical(ClosureKind):
 
     name = 'spherical'
     coordinate_type = 'quaternion'
+    turns_freely = True
     hidden, hidden_start = ('w', 'x', 'y', 'z'), (1.0, 0.0, 0.0, 0.0)
     refused = {**ClosureKind.refused, **dict.fromkeys(('axis', 'axis2'), 'has no axis')}
     closure_equations = 3

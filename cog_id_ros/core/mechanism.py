@@ -23,17 +23,17 @@ import warnings
 
 import numpy as np
 
-from . import assembly, closure, degrees_of_freedom, joints, spherical_chains
+from . import assembly, closure, degrees_of_freedom, idle_spins, joints, spherical_chains
 from .assembly import AssemblyWarning
 from .errors import MechanismConfigError
 from .kinematics import BASE, JointSpec, KinematicModel
-from .parameters import ParameterReader
+from .parameters import ParameterReader, split_owner
 from .spherical_chains import SphericalChain
 from .value_types import FloatArray
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
-                  'max_condition_number', 'closure_tolerance')
+                  'max_condition_number', 'closure_tolerance', 'locked_joints', 'idle_spins')
 LINK_KEYS = ('mass', 'com', 'inertia')
 JOINT_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy',
               'axis', 'axis2', 'lower', 'upper', 'effort')
@@ -66,12 +66,14 @@ MAX_LOOPS = 40
 MAX_ACTIVE_JOINTS = 100
 MAX_JACOBIAN_COLUMNS = 5000   # links x active joints
 
-#: names of links and joints become components of ROS 2 parameter names
-#: (``links.<link>.mass``): letters, digits and '_', not starting with a digit
 #: what :func:`bounded` checks and hands back
 Values = TypeVar('Values', bound=Sequence[float])
 
-NAME_PATTERN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*\Z')
+#: what no name of a link or joint may hold: control characters (a line break would split a
+#: log line, a CSV row or a parameter file's key). Anything else is a name, as URDF exporters
+#: write them ('/', a leading digit, '.', spaces, non-ASCII letters): ROS 2 parameter files
+#: hold such keys (``links.<name>.mass``), and outputs carry the names unchanged
+NAME_REFUSED = re.compile(r'[\x00-\x1f\x7f-\x9f]')
 
 
 class Mechanism:
@@ -88,6 +90,7 @@ class Mechanism:
         self._read_links(reader)
         self._read_joints(reader)
         self._read_positions(reader)
+        idle_spins.read_locks(self, reader)
         self._reject_unknown(reader)
         self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs)
         #: the solver's coordinates: the joints (mechanism.joints), then the hidden ones of
@@ -99,10 +102,9 @@ class Mechanism:
         self.link_index = {name: k for k, name in enumerate(self.links)}
         self.active_index = [self.joint_index[name] for name in self.active_joints]
         try:
-            q, moved, problem = assembly.assemble(self)
-            self._assembled(q)
-            matrix, self.closure_rank, self.dof = degrees_of_freedom.count(self, moved, problem)
+            matrix = self._analyse()
             self._actuated(degrees_of_freedom.primary_actuators(self, matrix, self.dof))
+            degrees_of_freedom.report_dependent(self, matrix)
         except (np.linalg.LinAlgError, ArithmeticError, FloatingPointError) as exc:
             raise MechanismConfigError(
                 'mechanism.initial_positions',
@@ -152,6 +154,8 @@ class Mechanism:
                 'mechanism.gravity', f'must be at most {MAX_GRAVITY:g} m/s^2 long, got '
                                      f'{list(self.gravity)} ({gravity_norm:.6g} m/s^2)')
         m = len(self.active_joints)
+        #: torque_weights written: a redundancy is meant (degrees_of_freedom.report_dependent)
+        self.weights_given = r.has('mechanism.torque_weights')
         self.torque_weights = r.vector('mechanism.torque_weights', m, default=(1.0,) * m)
         for k, w in enumerate(self.torque_weights):
             if w <= 0.0:
@@ -292,17 +296,18 @@ class Mechanism:
         for group, names, keys in (('links', self.links, LINK_KEYS),
                                    ('joints', self.declared_joints, joint_keys)):
             for name in r.unused(group + '.'):
-                parts = name.split('.')
-                if len(parts) < 3 or parts[1] not in names:
+                owner, key = split_owner(name[len(group) + 1:], names)
+                if owner is None:
                     raise MechanismConfigError(
-                        name, f"unknown {group[:-1]} '{parts[1]}' (not in mechanism.{group})")
-                kind: Any = kinds.get(parts[1]) if group == 'joints' else None
-                why = kind.refused.get(parts[2]) if kind is not None else None
+                        name, f"unknown {group[:-1]} '{key.split('.')[0]}' (not in "
+                              f"mechanism.{group})")
+                kind: Any = kinds.get(owner) if group == 'joints' else None
+                why = kind.refused.get(key) if kind is not None else None
                 if why:
                     raise MechanismConfigError(name, f'not a parameter of a {kind.name} joint: '
                                                      f'a {kind.name} joint {why}')
                 raise MechanismConfigError(
-                    name, f"unknown parameter ({group}.{parts[1]}.* takes {', '.join(keys)})")
+                    name, f"unknown parameter ({group}.{owner}.* takes {', '.join(keys)})")
 
     # --- after reading: the solver form, the assembled pose, the actuators ------------------
 
@@ -319,6 +324,9 @@ class Mechanism:
             return
         params = spherical_chains.solver_parameters(self.parameters, chains, self.joints,
                                                     self.assembled_positions)
+        params.pop('mechanism.idle_spins', None)         # the spins are locked already
+        if self.locked_joints:
+            params['mechanism.locked_joints'] = list(self.locked_joints)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter('ignore', AssemblyWarning)
@@ -356,6 +364,28 @@ class Mechanism:
                 for row in np.atleast_2d(positions)]
         return np.array(rows[0] if positions.ndim == 1 else rows)
 
+    def _analyse(self) -> FloatArray:
+        """Assembly and the degrees of freedom (assembly.py, degrees_of_freedom.py); with
+        ``idle_spins: lock``, once more with the joints that take out the idle spins
+        locked (idle_spins.py). The closure Jacobian at the assembled pose."""
+        #: True once idle_spins: lock has locked joints of its own choice
+        self.spins_locked = False
+        notes: list[str] = []
+        while True:
+            q, moved, problem = assembly.assemble(self)
+            self._assembled(q)
+            try:
+                matrix, self.closure_rank, self.dof = degrees_of_freedom.count(
+                    self, moved, problem)
+            except idle_spins.LockThem as lock:
+                self.spins_locked, notes = True, lock.notes
+                self.locked_joints = self.locked_joints + [self.joints[j] for j in lock.joints]
+                self.locked_index = sorted(self.locked_index + lock.joints)
+                continue
+            for text in notes:
+                assembly.note(self, text)
+            return matrix
+
     def _assembled(self, q: Sequence[float]) -> None:
         #: every coordinate of the solver at the assembled pose (hidden ones included)
         self.assembled_coordinates = tuple(q)
@@ -367,7 +397,8 @@ class Mechanism:
         self.primary_joints = [self.active_index[i] for i in self.primary]
         #: (index into active_joints, joint index) of each primary actuator
         self.primary_pairs = list(zip(self.primary, self.primary_joints))
-        fixed = set(self.primary_joints)
+        fixed = set(self.primary_joints) | set(self.locked_index)
+        #: the coordinates solved for: all but the primary actuators and the locked joints
         self.free_joints = [j for j in range(self.n_coordinates) if j not in fixed]
         self.inverse_torque_weights = [1.0 / w for w in self.torque_weights]
 
@@ -460,24 +491,18 @@ def _check_sizes(links: Sequence[str], joints: Sequence[str], active: Sequence[s
             f'size limits)')
 
 
+def name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name a link or joint (a control character in it), or None."""
+    found = NAME_REFUSED.search(name)
+    if found is None:
+        return None
+    return (f'holds the control character U+{ord(found.group()):04X} at index '
+            f'{found.start()}, which would split log lines, CSV rows and parameter keys')
+
+
 def _check_names(parameter: str, kind: str, names: Iterable[str]) -> None:
-    """Names of links and joints are parts of ROS 2 parameter names: letters, digits, '_'."""
+    """Any name but one with a control character (NAME_REFUSED)."""
     for name in names:
-        if NAME_PATTERN.match(name):
-            continue
-        fixed = re.sub(r'[^A-Za-z0-9_]', '_', name)
-        if fixed[:1].isdigit():
-            fixed = f'{kind}_{fixed}'
-        if '.' in name:
-            why = (f"contains '.', which ROS 2 reads as a separator of parameter names "
-                   f"('{parameter.split('.')[1]}.{name}.*' is ambiguous)")
-        elif name[:1].isdigit():
-            why = 'starts with a digit, which a ROS 2 parameter name component must not'
-        else:
-            bad = sorted({c for c in name if not (c.isascii() and (c.isalnum() or c == '_'))})
-            why = f"contains {', '.join(repr(c) for c in bad)}"
-        raise MechanismConfigError(
-            parameter,
-            f"{kind} name '{name}' {why}; names of links and joints become parts of ROS 2 "
-            f"parameter names ({parameter.split('.')[1]}.<name>.*) and may hold only letters, "
-            f"digits and '_', not starting with a digit: use '_' instead, e.g. '{fixed}'")
+        problem = name_problem(name)
+        if problem:
+            raise MechanismConfigError(parameter, f'{kind} name {name!r} {problem}; remove it')

@@ -264,3 +264,10 @@ def _is_number_like(value: object) -> bool:
         return isinstance(value, np.number) and not isinstance(value, np.bool_)
     except ImportError:  # pragma: no cover
         return False
+
+
+def split_owner(rest: str, names: list) -> tuple:
+    """(name, key) of ``<name>.<key>``, the rest of a ``links.*`` or ``joints.*`` parameter,
+    for the longest of ``names`` it starts with (names may hold '.'); (None, rest) if none."""
+    owner = max((n for n in names if rest.startswith(n + '.')), key=len, default=None)
+    return (owner, rest[len(owner) + 1:]) if owner is not None else (None, rest)

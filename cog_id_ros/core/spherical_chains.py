@@ -10,7 +10,7 @@ torques are the same (the helper links carry no mass); the work is about half.
 
 A chain P -j1- a -j2- b -j3- C qualifies when:
 
-* j1, j2, j3 are revolute and passive (not in active_joints);
+* j1, j2, j3 are revolute and passive (not in active_joints, not locked);
 * a and b have zero mass and inertia and no joint but these;
 * consecutive axes meet at right angles in one point: j1 and j2 in link a, j2 and j3 in
   link b, at the same point of j2's axis;
@@ -46,6 +46,7 @@ import numpy as np
 from . import kinematics as kin
 from . import spatial as sp
 from .joints import Revolute, Spherical
+from .parameters import split_owner
 from .pipeline import massless
 from .value_types import FloatArray, Lane, MechanismLike, Ops, Rotation, Vec3
 
@@ -86,7 +87,8 @@ def chains_of(mechanism: MechanismLike, near_lock: bool = False) -> list[Spheric
     return find_chains(
         m.links, m.base_link,
         [massless(mass, inertia) for mass, inertia in zip(m.link_mass, m.link_inertia)],
-        m.joint_specs, m.closure_specs, set(m.active_joints), m.assembled_positions,
+        m.joint_specs, m.closure_specs, set(m.active_joints) | set(m.locked_joints),
+        m.assembled_positions,
         max(1.0, m.attachment_scale), near_lock)
 
 
@@ -210,9 +212,12 @@ def solver_parameters(params: Mapping[str, Any], chains: Sequence[SphericalChain
     revolute and prismatic ones) without the chains' entries."""
     links = {h for chain in chains for h in chain.helpers}
     chain_of = {j: chain for chain in chains for j in chain.joints}
+    # (names may hold '.': a key's owner is the longest name it starts with)
     out = {key: value for key, value in params.items()
-           if not (key.startswith('links.') and key.split('.')[1] in links or
-                   key.startswith('joints.') and key.split('.')[1] in chain_of)}
+           if not (key.startswith('links.') and split_owner(
+                       key[len('links.'):], params['mechanism.links'])[0] in links or
+                   key.startswith('joints.') and split_owner(
+                       key[len('joints.'):], params['mechanism.joints'])[0] in chain_of)}
     out['mechanism.links'] = [name for name in params['mechanism.links'] if name not in links]
     out['mechanism.joints'] = [chain_of[name].name if name in chain_of else name
                                for name in params['mechanism.joints']

@@ -93,23 +93,25 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
     return None
 
 
-def urdf_base_dir(command_line: Sequence[str] | None, node_name: str) -> str | None:
-    """The directory a relative ``mechanism.urdf_file`` is relative to: that of the
-    ``--params-file`` that gives it to the node called ``node_name`` (rcl applies the files
-    and ``-p`` rules in their order on the command line: the last one that gives it counts);
-    None (the working directory) when a ``-p`` rule gives it, or nothing does."""
+def urdf_base_dir(command_line: Sequence[str] | None, node_name: str,
+                  parameter: str = 'mechanism.urdf_file') -> str | None:
+    """The directory a relative ``mechanism.urdf_file`` (or another file parameter,
+    ``mechanism.loop_closure_file``) is relative to: that of the ``--params-file`` that
+    gives it to the node called ``node_name`` (rcl applies the files and ``-p`` rules in
+    their order on the command line: the last one that gives it counts); None (the working
+    directory) when a ``-p`` rule gives it, or nothing does."""
     base = None
     args = list(command_line or ())
     for arg, value in zip(args, args[1:]):
         if arg == '--params-file':
             try:
-                given = 'mechanism.urdf_file' in params_file.load_params_file(value, node_name)
+                given = parameter in params_file.load_params_file(value, node_name)
             except MechanismConfigError:
                 given = False
             if given:
                 base = os.path.dirname(os.path.abspath(value))
         elif arg in ('-p', '--param') and \
-                value.split(':=', 1)[0].rsplit(':', 1)[-1] == 'mechanism.urdf_file':
+                value.split(':=', 1)[0].rsplit(':', 1)[-1] == parameter:
             base = None
     return base
 

@@ -84,8 +84,9 @@ class CogIdNode(ReadOnlyNode):
     def _build(self, command_line: Sequence[str] | None,
                interruptible: Callable[[], ContextManager]) -> None:
         overrides = self.override_values()
-        base_dir = urdf_base_dir(command_line, self.get_name()) \
-            if 'mechanism.urdf_file' in overrides else None
+        base_dir = {name: urdf_base_dir(command_line, self.get_name(), name)
+                    for name in ('mechanism.urdf_file', 'mechanism.loop_closure_file')
+                    if name in overrides}
         with interruptible():
             self.mechanism = Mechanism.from_parameters(self.declare_given(
                 overrides, is_mechanism_parameter, 'mechanism (read at start-up)'),

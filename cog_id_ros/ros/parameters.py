@@ -303,10 +303,12 @@ OTHER_PARAMETERS = (
     ('`mechanism.*`, `links.*`, `joints.*`', '', '', '',
      'the mechanism (docs/parameter_file.md)'),
     ('`robot_description`, `mechanism.urdf_file`, `mechanism.loop_closures`, '
-     '`loop_closures.*`, `mechanism.initial_positions.<joint>`', '', '', '',
+     '`loop_closures.*`, `mechanism.loop_closure_file`, `mechanism.initial_positions.<joint>`',
+     '', '', '',
      "the mechanism in the URDF form instead (docs/urdf.md): the URDF as a string (ROS's "
      'standard parameter) or a file (relative to the params file that gives it), the joints '
-     'that close its loops, and the assembly mode by joint name'),
+     'that close its loops, or the loop list published with it for Pinocchio (a file, '
+     'relative to the params file that gives it), and the assembly mode by joint name'),
     ('`use_sim_time`', 'bool', '`false`', 'true, false',
      "rclpy's: the node's clock from `/clock` (stamps of zero, `max_stamp_lead`, the stamp "
      'of `/diagnostics`); read-only like the rest'),

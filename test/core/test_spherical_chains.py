@@ -87,6 +87,7 @@ def test_a_chain_that_is_not_a_spherical_joint_is_solved_as_written(change):
         p['links.sph_a.mass'] = 0.01
     elif change == 'active':                     # a chain joint driven (then two actuators)
         p['mechanism.active_joints'] = p['mechanism.active_joints'] + ['sph_y']
+        p['mechanism.torque_weights'] = [1.0, 1.0]     # the redundancy is meant: no warning
     elif change == 'offset':                     # the middle axis (y) 1 mm off the centre
         xyz = p.get('joints.sph_y.parent_xyz', [0.0, 0.0, 0.0])
         p['joints.sph_y.parent_xyz'] = [xyz[0] + 1e-3, xyz[1], xyz[2]]
