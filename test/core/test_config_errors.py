@@ -128,14 +128,14 @@ def test_assembly_holds_the_actuators_at_their_initial_positions():
 LOAD_CHILD = r"""
 import json, sys, time
 import cog_id_ros
-start = time.perf_counter()
+start = time.process_time()     # CPU seconds: the load of a shared machine does not count
 try:
     cog_id_ros.Mechanism.from_params_file(sys.argv[1])
     out = {'type': None}
 except BaseException as exc:  # noqa: BLE001 -- report whatever came out
     out = {'type': type(exc).__name__, 'parameter': getattr(exc, 'parameter', None),
            'message': str(exc)[:500]}
-out['seconds'] = time.perf_counter() - start
+out['seconds'] = time.process_time() - start
 print(json.dumps(out))
 """
 
@@ -200,7 +200,8 @@ def _run_load(path):
 def test_bad_file_values_are_config_errors_within_two_seconds(case, tmp_path):
     """Reliability item 4: nulls, a 400-digit integer, recursive and exponential ("billion
     laughs") YAML aliases, absurd nesting: MechanismConfigError naming the parameter (or
-    params_file) within 2 s, never TypeError, OverflowError, RecursionError or a hang."""
+    params_file) within 2 s of CPU time (wall time on a loaded machine is not the loader's),
+    never TypeError, OverflowError, RecursionError or a hang (30 s of wall time)."""
     edit, parameter = BAD_FILES[case]
     text = edit(_paper_a_text())
     assert text != _paper_a_text()
