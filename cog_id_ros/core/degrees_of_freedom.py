@@ -12,19 +12,20 @@ fail raises MechanismConfigError with what to change.
 """
 import itertools
 import math
-from typing import Any
 
 import numpy as np
 
 from . import assembly, closure, idle_spins, spherical_chains
 from .assembly import check_loops_hint
 from .errors import MechanismConfigError
+from .value_types import FloatArray, MechanismLike
 
 #: relative singular value below which A loses rank
 RANK_TOLERANCE = 1e-9
 
 
-def count(mech, moved, problem):
+def count(mech: MechanismLike, moved: str | None,
+          problem: MechanismConfigError | None) -> tuple[FloatArray, int, int]:
     """(A, rank of A, dof) at mech.assembled_coordinates; ``moved``, ``problem``: what
     assembly.assemble said about actuators it had to move (``problem`` is raised here,
     after a rigid mechanism, whose message is the clearer one)."""
@@ -56,14 +57,15 @@ def count(mech, moved, problem):
     return matrix, rank, dof
 
 
-def primary_actuators(mech, matrix, dof):
+def primary_actuators(mech: MechanismLike, matrix: FloatArray, dof: int) -> list[int]:
     """Indices (into active_joints) of ``dof`` actuators whose coordinates determine all
     others best (smallest condition number); the rest of a redundant set are secondary.
 
     ``matrix`` is the closure Jacobian at the assembled positions; the condition number
     of its free columns is the Frobenius one the solver uses (lane_linalg), from their
     singular values: ||A_f||_F ||A_f^+||_F."""
-    best, best_cond = None, math.inf
+    best: tuple[int, ...] | None = None
+    best_cond = math.inf
     n = mech.n_coordinates
     combos = itertools.combinations(range(len(mech.active_index)), dof)
     locked = set(mech.locked_index)
@@ -92,7 +94,7 @@ def primary_actuators(mech, matrix, dof):
     return list(best)
 
 
-def report_dependent(mech: Any, matrix: np.ndarray) -> None:
+def report_dependent(mech: MechanismLike, matrix: FloatArray) -> None:
     """An assembly warning naming the actuators that do not move independently, when the
     mechanism is redundant and ``mechanism.torque_weights`` does not say that is meant."""
     if not mech.is_redundant or mech.weights_given:
@@ -111,7 +113,7 @@ def report_dependent(mech: Any, matrix: np.ndarray) -> None:
         f'revolute one)')
 
 
-def _gimbal_lock_hint(mech):
+def _gimbal_lock_hint(mech: MechanismLike) -> str:
     """What to do where three revolute joints through massless links (a ball joint as
     written, spherical_chains.py) are near their gimbal lock at the assembled pose."""
     chains = [chain for chain in spherical_chains.chains_of(mech, near_lock=True)
@@ -126,14 +128,14 @@ def _gimbal_lock_hint(mech):
             f'joint, which has no lock, or give initial_positions away from it')
 
 
-def _rank(singular_values):
+def _rank(singular_values: np.ndarray) -> int:
     """The rank that singular values (descending) give: those above RANK_TOLERANCE times
     the largest (or times 1, if that is smaller)."""
     scale = max(1.0, singular_values[0]) if singular_values.size else 1.0
     return int(np.sum(singular_values > RANK_TOLERANCE * scale))
 
 
-def _condition_number(a):
+def _condition_number(a: FloatArray) -> float:
     """||A||_F ||A^+||_F of a matrix with at least as many rows as columns (inf if the
     columns are dependent); 1.0 for no columns, like QRLeastSquares.condition_number."""
     rows, cols = a.shape
