@@ -311,7 +311,7 @@ def _c_many(name: str, params: Params, sizes: list[int], n_out: int) -> list[str
 
 
 def c_module_source(module: str, kernels: Sequence[tuple[str, Params, str, Fields]],
-                    extra: str = '', extra_methods: Sequence[str] = ()
+                    extra: str = '', extra_methods: Sequence[tuple[str, str, str]] = ()
                     ) -> tuple[str, dict[str, int]]:
     """C source of a CPython extension module ``module`` with one function per kernel.
 

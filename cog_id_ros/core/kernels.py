@@ -239,7 +239,8 @@ class ReferenceKernels:
         return flat(pose_record(self.mechanism, columns(q), columns(target), columns(qd),
                                 columns(qdd), sp.ArrayOps), len(q))
 
-    def forward_many(self, q, target, qd, tau):
+    def forward_many(self, q: FloatArray, target: FloatArray, qd: FloatArray,
+                     tau: FloatArray) -> FloatArray:
         return flat(forward_record(self.mechanism, *map(columns, (q, target, qd, tau)),
                                    sp.ArrayOps), len(q))
 

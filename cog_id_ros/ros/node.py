@@ -370,7 +370,7 @@ class CogIdNode(ReadOnlyNode):
             q, qdot = solver.last_pose()[0], []
         # (called where joint_states_pub is not None; qdot: rates were given)
         self.joint_states_pub.publish(  # type: ignore[union-attr]
-            self.outputs.pose_for(frame_id, stamp, q, qdot))  # type: ignore[arg-type]
+            self.outputs.pose_for(frame_id, stamp, q, qdot))
 
     def clip(self, tau: np.ndarray) -> bool:
         """Clip efforts (an array, in place) to +-effort_limits; count it; True if clipped."""

@@ -188,7 +188,7 @@ def _check_per_joint(param: NodeParameter, value: Any, active_types: list[str]) 
     return np.array(limits)
 
 
-def _check_gains(param, value, active_types):
+def _check_gains(param: NodeParameter, value: Any, active_types: list[str]) -> Any:
     import numpy as np
     n_act = len(active_types)
     if value is None or (isinstance(value, (list, tuple)) and len(value) == 0):
@@ -361,7 +361,8 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'may stamp sim time) is rejected (`stale`)'),
     NodeParameter(
         'max_measurement_step', 'double[]', None, 'per_joint', what='step',
-        per_joint_default=lambda joint_type: MEASUREMENT_MAX_STEP[joints.kind(joint_type).unit],
+        per_joint_default=lambda joint_type: MEASUREMENT_MAX_STEP[
+            joints.kind(joint_type).unit],  # type: ignore[union-attr, index]
         default_text=f'{MEASUREMENT_MAX_STEP["rad"]!r} rad revolute, '
                      f'{MEASUREMENT_MAX_STEP["m"]!r} m prismatic',
         description='feedback modes, rad or m: a measured state that moves an active joint '
