@@ -223,62 +223,109 @@ class ReferenceKernels:
                                    sp.ArrayOps), len(q))
 
 
-def trace(mechanism):
-    """The four kernels run once on symbolic lanes: [(name, params, record type, fields)], what
-    the emitters (emitter.py) write as code."""
+#: the kernels every solver loads (the torques), and those made on first use by forward
+#: dynamics and the simulator (a second library: a solver that only serves torques does not
+#: trace or compile them)
+TORQUE_KERNELS = ('prediction', 'closure', 'dynamics')
+FORWARD_KERNELS = ('prediction', 'closure', 'forward')
+
+
+def trace(mechanism, kinds=TORQUE_KERNELS):
+    """The kernels ``kinds`` run once on symbolic lanes: [(name, params, record type,
+    fields)], what the emitters (emitter.py) write as code."""
     m = mechanism
     graph = Graph()
     q = graph.inputs('q', m.n_coordinates)
+    effort = 'tau' if 'forward' in kinds else 'qdd'      # dynamics' qdd, forward's tau
     target, qd, qdd = (graph.inputs(name, len(m.active_joints))
-                       for name in ('target', 'qd', 'qdd'))
-    tau = graph.inputs('tau', len(m.active_joints))
+                       for name in ('target', 'qd', effort))
     flat = graph.inputs('basis', m.n_coordinates * m.dof)
     basis = [flat[j * m.dof:(j + 1) * m.dof] for j in range(m.n_coordinates)]
-    predicted = prediction_record(m, q, basis, target)
-    _, closed = closure_record(m, q, SymOps)
-    whole = pose_record(m, q, target, qd, qdd, SymOps)
-    forward = forward_record(m, q, target, qd, tau, SymOps)
-    return [('prediction', [('q', q), ('basis', basis), ('goal', target)], PredictionRecord,
-             list(zip(PredictionRecord._fields, predicted))),
-            ('closure', [('q', q)], ClosureRecord, list(zip(ClosureRecord._fields, closed))),
-            ('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)], PoseRecord,
-             list(zip(PoseRecord._fields, whole))),
-            ('forward', [('q', q), ('target', target), ('qd', qd), ('tau', tau)], ForwardRecord,
-             list(zip(ForwardRecord._fields, forward)))]
+    out = []
+    for kind in kinds:
+        if kind == 'prediction':
+            out.append(('prediction', [('q', q), ('basis', basis), ('goal', target)],
+                        PredictionRecord, list(zip(PredictionRecord._fields,
+                                                   prediction_record(m, q, basis, target)))))
+        elif kind == 'closure':
+            out.append(('closure', [('q', q)], ClosureRecord,
+                        list(zip(ClosureRecord._fields, closure_record(m, q, SymOps)[1]))))
+        elif kind == 'dynamics':
+            out.append(('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)],
+                        PoseRecord, list(zip(PoseRecord._fields,
+                                             pose_record(m, q, target, qd, qdd, SymOps)))))
+        else:
+            out.append(('forward', [('q', q), ('target', target), ('qd', qd), ('tau', qdd)],
+                        ForwardRecord, list(zip(ForwardRecord._fields,
+                                                forward_record(m, q, target, qd, qdd,
+                                                               SymOps)))))
+    return out
 
 
 class PythonKernels(ReferenceKernels):
     """The kernels traced into straight-line Python functions (``source`` keeps their text,
-    ``operations`` their sizes); N samples run the lane code on arrays (reference)."""
+    ``operations`` their sizes); N samples run the lane code on arrays (reference). The
+    forward kernel is traced when first used."""
     name = 'python'
 
     def __init__(self, mechanism, traced=None):
         super().__init__(mechanism)
         self.source, self.operations = {}, {}
-        for name, params, record, fields in traced or trace(mechanism):
+        self._add(trace(mechanism) if traced is None else traced)
+
+    def _add(self, traced):
+        for name, params, record, fields in traced:
             function, self.source[name], self.operations[name] = python_function(
                 name, params, record, fields)
             setattr(self, name, function)
+
+    def __getattr__(self, name):
+        """The forward kernel, traced on first use (only missing attributes come here)."""
+        if name != 'forward' or name.startswith('_') or '_mechanism' not in self.__dict__:
+            raise AttributeError(name)
+        self._add(trace(self.mechanism, ('forward',)))
+        return self.forward
 
 
 class NativeKernels(ReferenceKernels):
     """The kernels compiled from C (native.py): a library per mechanism, cached on disk by a
     hash of what the kernels are made of (:func:`kernel_key`), so a cached mechanism loads
-    without tracing. N samples run the same C in a loop. Raises
-    native.NativeUnavailable when they cannot be had."""
+    without tracing. N samples run the same C in a loop. Forward dynamics and the simulator
+    step (``forward``, ``rk4_step``) are a second library of the mechanism, loaded (or
+    built) when first used. Raises native.NativeUnavailable when they cannot be had."""
     name = 'native'
 
     def __init__(self, mechanism):
         super().__init__(mechanism)
         module, self.operations = native.load_module(kernel_key(mechanism), self._source)
-        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord, ForwardRecord)
+        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
         self.prediction = module.prediction
         self.closure, self.dynamics = module.closure, module.dynamics
-        self.forward = module.forward
-        #: one Simulation step in C (native_simulation.py)
-        self.rk4_step = module.rk4_step
         self.module = module
+        self.modules = dict.fromkeys(TORQUE_KERNELS, module)
         self.widths = {name: width(layout) for name, layout in self.layouts.items()}
+
+    def __getattr__(self, name):
+        """``forward`` and ``rk4_step`` (one Simulation step in C, native_simulation.py),
+        from the second library, loaded on first use (only missing attributes come here).
+        Where it cannot be had, the forward kernel is traced into Python (one log line says
+        why) and there is no ``rk4_step`` (None)."""
+        if name not in ('forward', 'rk4_step') or '_mechanism' not in self.__dict__:
+            raise AttributeError(name)
+        m = self.mechanism
+        try:
+            module, operations = native.load_module(kernel_key(m) + ':forward',
+                                                    self._forward_source)
+        except native.NativeUnavailable as exc:
+            KERNELS.say_fallback(exc)
+            self.forward, self.rk4_step = PythonKernels(m, []).forward, None
+            self.modules['forward'] = None
+            return getattr(self, name)
+        module.set_record_types(PredictionRecord, ClosureRecord, ForwardRecord)
+        self.operations['forward'] = operations['forward']
+        self.forward, self.rk4_step = module.forward, module.rk4_step
+        self.modules['forward'] = module
+        return getattr(self, name)
 
     def closure_many(self, q):
         return self._many('closure', q)
@@ -287,20 +334,32 @@ class NativeKernels(ReferenceKernels):
         return self._many('dynamics', q, target, qd, qdd)
 
     def forward_many(self, q, target, qd, tau):
+        if 'forward' not in self.modules:
+            self.__getattr__('forward')         # the second library, loaded on first use
+        if self.modules['forward'] is None:
+            return super().forward_many(q, target, qd, tau)
         return self._many('forward', q, target, qd, tau)
 
     def _many(self, name, *arrays):
         arrays = [np.ascontiguousarray(a, dtype=float) for a in arrays]
         out = np.empty((len(arrays[0]), self.widths[name]))
-        getattr(self.module, name + '_many')(*arrays, out)
+        getattr(self.modules[name], name + '_many')(*arrays, out)
         return out
 
     def _source(self, module):
         """(C source of the module, operations per kernel): traced here, only when the
         library must be built, and not kept (a large mechanism's trace is tens of MB)."""
+        return c_module_source(module, [(name, params, record.__name__, fields)
+                                        for name, params, record, fields in
+                                        trace(self.mechanism)])
+
+    def _forward_source(self, module):
+        """The same for the second library: the forward kernel, the two it is closed with,
+        and the Simulation step (native_simulation.py)."""
         m = self.mechanism
         return c_module_source(module, [(name, params, record.__name__, fields)
-                                        for name, params, record, fields in trace(m)],
+                                        for name, params, record, fields in
+                                        trace(m, FORWARD_KERNELS)],
                                native_simulation.simulation_source(m, self.layouts),
                                [(name, 'sim_' + name, doc)
                                 for name, doc in native_simulation.METHODS])
