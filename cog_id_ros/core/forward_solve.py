@@ -32,6 +32,7 @@ class ForwardSolver:
     def __init__(self, mechanism: Mechanism, kernels: Any, continuation_step: float,
                  joints_at: Any) -> None:
         self.mechanism = mechanism
+        self.kernels = kernels = kernels.with_forward()     # (made now on first use)
         self.serial = SampleSolver(mechanism, kernels, continuation_step, whole='forward')
         self.batch = Batch(mechanism, self.serial, joints_at)
 

@@ -199,6 +199,14 @@ class ReferenceKernels:
         both), and a mechanism and its kernels go together."""
         return self._mechanism()
 
+    #: one Simulation step in C: compiled kernels only (NativeKernels)
+    rk4_step = None
+
+    def with_forward(self):
+        """These kernels, with the forward kernel ready (traced or compiled on first use by
+        the backends that make it: a solver that only serves torques never makes it)."""
+        return self
+
     def prediction(self, q, basis, goal):
         return prediction_record(self.mechanism, q, basis, goal)
 
@@ -279,12 +287,10 @@ class PythonKernels(ReferenceKernels):
                 name, params, record, fields)
             setattr(self, name, function)
 
-    def __getattr__(self, name):
-        """The forward kernel, traced on first use (only missing attributes come here)."""
-        if name != 'forward' or name.startswith('_') or '_mechanism' not in self.__dict__:
-            raise AttributeError(name)
-        self._add(trace(self.mechanism, ('forward',)))
-        return self.forward
+    def with_forward(self):
+        if 'forward' not in self.source:        # traced on first use
+            self._add(trace(self.mechanism, ('forward',)))
+        return self
 
 
 class NativeKernels(ReferenceKernels):
@@ -305,27 +311,26 @@ class NativeKernels(ReferenceKernels):
         self.modules = dict.fromkeys(TORQUE_KERNELS, module)
         self.widths = {name: width(layout) for name, layout in self.layouts.items()}
 
-    def __getattr__(self, name):
-        """``forward`` and ``rk4_step`` (one Simulation step in C, native_simulation.py),
-        from the second library, loaded on first use (only missing attributes come here).
-        Where it cannot be had, the forward kernel is traced into Python (one log line says
-        why) and there is no ``rk4_step`` (None)."""
-        if name not in ('forward', 'rk4_step') or '_mechanism' not in self.__dict__:
-            raise AttributeError(name)
+    def with_forward(self):
+        """``forward`` and ``rk4_step`` (one Simulation step in C, native_simulation.py) from
+        the second library, loaded (or built) on first use. Where it cannot be had, the
+        forward kernel is traced into Python (one log line says why), without rk4_step."""
+        if 'forward' in self.modules:
+            return self
         m = self.mechanism
         try:
             module, operations = native.load_module(kernel_key(m) + ':forward',
                                                     self._forward_source)
         except native.NativeUnavailable as exc:
             KERNELS.say_fallback(exc)
-            self.forward, self.rk4_step = PythonKernels(m, []).forward, None
+            self.forward = PythonKernels(m, []).with_forward().forward
             self.modules['forward'] = None
-            return getattr(self, name)
+            return self
         module.set_record_types(PredictionRecord, ClosureRecord, ForwardRecord)
         self.operations['forward'] = operations['forward']
         self.forward, self.rk4_step = module.forward, module.rk4_step
         self.modules['forward'] = module
-        return getattr(self, name)
+        return self
 
     def closure_many(self, q):
         return self._many('closure', q)
@@ -334,9 +339,7 @@ class NativeKernels(ReferenceKernels):
         return self._many('dynamics', q, target, qd, qdd)
 
     def forward_many(self, q, target, qd, tau):
-        if 'forward' not in self.modules:
-            self.__getattr__('forward')         # the second library, loaded on first use
-        if self.modules['forward'] is None:
+        if self.with_forward().modules['forward'] is None:
             return super().forward_many(q, target, qd, tau)
         return self._many('forward', q, target, qd, tau)
 

@@ -73,7 +73,7 @@ class Simulation:
         self._pairs = solved.primary_pairs          # (active index, joint index) per primary
         serial = self._forward.serial
         #: the step in C (compiled kernels only) and its constants
-        self._native: Optional[Callable[..., Any]] = getattr(kernels, 'rk4_step', None)
+        self._native: Optional[Callable[..., Any]] = self._forward.kernels.rk4_step
         self._config = step_config(self.time_step, solved, INERTIA_CONDITION_LIMIT,
                                    serial.limits, serial.bounds)
         self.reset()
