@@ -25,7 +25,7 @@ from .continuation import correction_ok, fits_one_step, prediction
 from .errors import CogIdError
 from .inputs import check_values, checked_sample, out_of_range
 from .joint_motion import projected_pose
-from .kernels import ClosureRecord, PoseRecord, unpack
+from .kernels import RECORDS, ClosureRecord, unpack
 from .lanes import columns
 from .sample_solve import (
     NEWTON_ITERATIONS,
@@ -79,14 +79,18 @@ class Evaluation:
 
 
 class Batch:
-    """The batch driver of one mechanism, around its per-sample solver."""
+    """The batch driver of one mechanism, around its per-sample solver (and its kernel for
+    closed poses: ``sample_solver.whole_name``, whose records :meth:`positions` returns)."""
 
     def __init__(self, mechanism: 'Mechanism', sample_solver: SampleSolver,
                  joints_at: Callable[[FloatArray], tuple[FloatArray, Any]]) -> None:
         self.mechanism = mechanism
         self.joints_at = joints_at      # the joints as written from the coordinates
         self.serial = sample_solver
-        self.kernels = sample_solver.kernels
+        self.kernels = kernels = sample_solver.kernels
+        name = sample_solver.whole_name
+        self.whole_many = getattr(kernels, name + '_many')
+        self.layout, self.record_type = kernels.layouts[name], RECORDS[name]
 
     def evaluate_one(self, state: 'State', q: FloatArray, qd: FloatArray, qdd: FloatArray,
                      on_invalid: str) -> tuple[Evaluation, 'State']:
@@ -156,7 +160,7 @@ class Batch:
         qdd = np.zeros_like(qa) if qdd is None else qdd
         if n == 0:
             empty = np.zeros((0, m.n_coordinates))
-            flat = self.kernels.dynamics_many(empty, qa, qd, qdd)
+            flat = self.whole_many(empty, qa, qd, qdd)
             return self.record(flat), empty, np.zeros(0, bool), [], state
         invalid = np.zeros(n, bool) if invalid is None else invalid
         knots = self.anchors(state, qa, invalid)                       # 1. serial anchors
@@ -253,8 +257,7 @@ class Batch:
             new_state = state
         changed = np.flatnonzero(redone | ~ok)
         if changed.size:
-            flat[changed] = self.kernels.dynamics_many(positions[changed],
-                                                       *(x[changed] for x in setpoints))
+            flat[changed] = self.whole_many(positions[changed], *(x[changed] for x in setpoints))
         return new_state
 
     def close(self, guess: FloatArray, qa: FloatArray, qd: FloatArray,
@@ -264,7 +267,7 @@ class Batch:
         dynamics outputs there, converged (N,), redundant mismatch (N,))."""
         m = self.mechanism
         q, converged = self.newton(guess)
-        flat = self.kernels.dynamics_many(q, qa, qd, qdd)
+        flat = self.whole_many(q, qa, qd, qdd)
         converged &= self.closed(self.record(flat))     # (after the last increment too)
         if not m.is_redundant:
             return q, flat, converged, np.zeros(len(q))
@@ -279,7 +282,7 @@ class Batch:
                                    [columns(row) for row in basis.swapaxes(0, 1)],
                                    columns(part.projection))
             q[todo], converged[todo] = self.newton(np.column_stack(moved))
-            flat[todo] = self.kernels.dynamics_many(q[todo], qa[todo], qd[todo], qdd[todo])
+            flat[todo] = self.whole_many(q[todo], qa[todo], qd[todo], qdd[todo])
             converged[todo] &= self.closed(self.record(flat[todo]))
         return q, flat, converged, np.abs(q[:, m.active_index] - qa).max(axis=1)
 
@@ -335,7 +338,7 @@ class Batch:
                                     self.mechanism.closure_tolerance)
 
     def record(self, flat: FloatArray) -> Any:
-        return unpack(flat, self.kernels.layouts['dynamics'], PoseRecord)
+        return unpack(flat, self.layout, self.record_type)
 
     def continues(self, start_state: 'State', qa: FloatArray, positions: FloatArray,
                   free_rows: FloatArray) -> BoolArray:

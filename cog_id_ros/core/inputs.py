@@ -21,9 +21,13 @@ if TYPE_CHECKING:
 #: the types of a control loop's setpoints (the fast path of setpoints)
 _FLOAT = {float}
 
+#: what the three inputs are called in messages: torques' (forward dynamics: q, qd, tau)
+LABELS = ('q', 'qd', 'qdd')
+
 
 def setpoints(mechanism: 'Mechanism', wrapping: Sequence[int], q: Any, qd: Any, qdd: Any,
-              limits: bool = True) -> tuple[Any, Any, Any, bool]:
+              limits: bool = True, labels: Sequence[str] = LABELS
+              ) -> tuple[Any, Any, Any, bool]:
     """The one way setpoints come in: (q, qd, qdd, single).
 
     One sample: three lists of M floats, checked: SetpointError for a value not finite, a
@@ -62,19 +66,19 @@ def setpoints(mechanism: 'Mechanism', wrapping: Sequence[int], q: Any, qd: Any, 
                 and all(-MAX_ANGLE <= q_[a] <= MAX_ANGLE for a in wrapping) \
                 and (not limits or within_limits(mechanism, q_)):
             return q_, qd_, qdd_, True
-    q, qd, qdd, single = setpoint_arrays(mechanism, q, qd, qdd)
+    q, qd, qdd, single = setpoint_arrays(mechanism, q, qd, qdd, labels)
     if not single:
         return q, qd, qdd, False
-    q, qd, qdd = checked_sample(mechanism, wrapping, q, qd, qdd, limits)
+    q, qd, qdd = checked_sample(mechanism, wrapping, q, qd, qdd, limits, labels)
     return q, qd, qdd, True
 
 
 def checked_sample(mechanism: 'Mechanism', wrapping: Sequence[int], q: FloatArray, qd: FloatArray,
-                   qdd: FloatArray,
-                   limits: bool = True) -> tuple[list[float], list[float], list[float]]:
+                   qdd: FloatArray, limits: bool = True, labels: Sequence[str] = LABELS
+                   ) -> tuple[list[float], list[float], list[float]]:
     """One sample given as arrays (1, M) as three lists of floats, or the SetpointError
     :func:`check_values` finds."""
-    _, errors = check_values(mechanism, wrapping, q, qd, qdd, True, limits)
+    _, errors = check_values(mechanism, wrapping, q, qd, qdd, True, limits, labels)
     if errors:
         raise errors[0]
     return q[0].tolist(), qd[0].tolist(), qdd[0].tolist()
@@ -87,8 +91,9 @@ def rates(mechanism: 'Mechanism', qd: Any) -> list[float]:
     return setpoints(mechanism, (), zeros, qd, zeros, limits=False)[1]
 
 
-def setpoint_arrays(mechanism: 'Mechanism', q: Any, qd: Any,
-                    qdd: Any) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
+def setpoint_arrays(mechanism: 'Mechanism', q: Any, qd: Any, qdd: Any,
+                    labels: Sequence[str] = LABELS
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
     """(q, qd, qdd) as float arrays of shape (N, M), and whether it was one sample.
 
     ``q`` is required; ``qd`` and ``qdd`` default to zeros. One sample is (M,), or a
@@ -99,10 +104,10 @@ def setpoint_arrays(mechanism: 'Mechanism', q: Any, qd: Any,
     if q is None:
         raise SetpointError(f'q: required, one position per active joint {names}')
     arrays: list[Any] = [_float_array(label, value, m) if value is not None else None
-              for label, value in (('q', q), ('qd', qd), ('qdd', qdd))]
+                         for label, value in zip(labels, (q, qd, qdd))]
     single = arrays[0].ndim == 1
     out: list[FloatArray] = []
-    for label, array in zip(('q', 'qd', 'qdd'), arrays):
+    for label, array in zip(labels, arrays):
         if array is None:
             out.append(np.zeros((1 if single else arrays[0].shape[0], m)))
             continue
@@ -121,8 +126,8 @@ def within_limits(mechanism: 'Mechanism', q: Sequence[float]) -> bool:
 
 
 def check_values(mechanism: 'Mechanism', wrapping: Sequence[int], q: FloatArray, qd: FloatArray,
-                 qdd: FloatArray, single: bool,
-                 limits: bool = True) -> tuple[Any, dict[int, SetpointError]]:
+                 qdd: FloatArray, single: bool, limits: bool = True,
+                 labels: Sequence[str] = LABELS) -> tuple[Any, dict[int, SetpointError]]:
     """SetpointError for the first non-finite entry, revolute position beyond MAX_ANGLE,
     or actuator outside its position limits (unless not ``limits``); returns (per-sample
     bool array, {sample: error})."""
@@ -134,7 +139,7 @@ def check_values(mechanism: 'Mechanism', wrapping: Sequence[int], q: FloatArray,
     errors: dict[int, SetpointError] = {}
     for i in np.flatnonzero(~(finite & in_range)):
         where = '' if single else f'sample {i}: '
-        for label, array in (('q', q), ('qd', qd), ('qdd', qdd)):
+        for label, array in zip(labels, (q, qd, qdd)):
             bad = np.flatnonzero(~np.isfinite(array[i]))
             if bad.size:
                 joint = mechanism.active_joints[bad[0]]

@@ -16,6 +16,7 @@ from .batch import Batch, Evaluation
 from .cog_jacobian import cog_poses
 from .continuation import State
 from .errors import MechanismConfigError, SetpointError
+from .forward_solve import LABELS, ForwardSolver
 from .inputs import out_of_range, rates, setpoint_arrays, setpoints
 from .joint_motion import active_velocity_map, combine
 from .kernels import kernels_for
@@ -56,6 +57,8 @@ class InverseDynamics:
         self._serial = SampleSolver(solved, kernels, self.continuation_step)
         self._batch = Batch(solved, self._serial, mechanism.joints_at)
         self._poses = PoseSolver(mechanism, self._serial, self._batch)
+        self._kernels = kernels
+        self._forward: Optional[ForwardSolver] = None     # made on first use
         self.reset()
 
     @property
@@ -82,6 +85,34 @@ class InverseDynamics:
         if single:
             return np.array(self._serve_one(q, qd, qdd))
         return self.evaluate(q, qd, qdd).torques
+
+    def forward_dynamics(self, q: ArrayLike, qd: Optional[ArrayLike],
+                         tau: Optional[ArrayLike]) -> np.ndarray:
+        """The accelerations (M,) or (N, M) the efforts ``tau`` (N m or N, active_joints
+        order) produce at positions ``q`` and rates ``qd``, with gravity: eq. (7) solved for
+        qdd (docs/simulation.md). ``qd``, ``tau``: zeros when None.
+
+        The pose is solved as :meth:`torques` solves it (warm start, branch, errors); a
+        redundant mechanism moves by the generalized force of its efforts alone.
+        SingularConfigurationError also for an inertia that cannot be solved.
+        """
+        positions, rates_in, efforts, single = setpoints(
+            self.mechanism, self._serial.wrapping, q, qd, tau, labels=LABELS)
+        if self._forward is None:       # (its kernels are loaded, or built, now)
+            self._forward = ForwardSolver(self._solved, self._kernels, self.continuation_step,
+                                          self.mechanism.joints_at)
+        if single:
+            record, self._state = self._forward.one(self._state, positions, rates_in, efforts)
+            return np.array(record.accelerations)
+        if len(positions) == 0:
+            return np.zeros(np.shape(positions))
+        if len(positions) == 1:
+            record, self._state = self._forward.one(
+                self._state, *(x[0].tolist() for x in (positions, rates_in, efforts)))
+            return np.array([record.accelerations])
+        accelerations, self._state = self._forward.many(self._state, positions, rates_in,
+                                                        efforts)
+        return accelerations
 
     def sample_torques(self, q: Sequence[float], qd: Optional[Sequence[float]] = None,
                        qdd: Optional[Sequence[float]] = None) -> list:

@@ -36,30 +36,12 @@ from .continuation import (
 from .errors import ClosureError, SingularConfigurationError
 from .inputs import out_of_range
 from .joint_motion import BasisLayout, projected_pose
+from .newton import LIKELY_CLOSED, NEWTON_ITERATIONS, NEWTON_MAX_INCREMENT, STAGNATION
 from .value_types import LaneMatrix
 
 if TYPE_CHECKING:
     from .kernels import PoseRecord, ReferenceKernels
     from .mechanism import Mechanism
-
-#: Newton iterations of one continuation step (from a first-order prediction within the
-#: step limits Newton converges in a few; more means the step is too long: it is halved)
-NEWTON_ITERATIONS = 12
-
-#: largest Newton increment (rad or m) applied at once; longer ones are scaled down
-NEWTON_MAX_INCREMENT = 0.5
-
-#: after a Newton increment below this (rad or m) the loops are probably closed (Newton
-#: converges quadratically: the next residual is of the order of its square times the
-#: mechanism's curvature, below the closure tolerance at control rate), so the whole record
-#: is evaluated at once; after a larger one (a continuation step far from the pose, a batch
-#: anchor) only the closure kernel, until the increments get small
-LIKELY_CLOSED = 1e-4
-
-#: a Newton increment below this (rad or m) is checked for stagnation: below 1e-15 of the
-#: largest coordinate Newton moves (a larger one cannot be, for coordinates within
-#: MAX_ANGLE or lengths; the actuators, held, may be at any angle)
-STAGNATION = 1e-5
 
 #: Gauss-Newton iterations of the redundant projection, and the increment that ends it
 PROJECTION_ITERATIONS = 6
@@ -70,13 +52,17 @@ class SampleSolver:
     """The per-sample solve of one mechanism with one set of kernels.
 
     A state is (q, V): every joint coordinate and the velocity basis there (a list over
-    joints of rows over the primary actuators), as solve() returns it.
+    joints of rows over the primary actuators), as solve() returns it. ``whole``: the kernel
+    that evaluates a closed pose, 'dynamics' (torques from qd, qdd) or 'forward'
+    (accelerations from qd and the efforts, in place of qdd: forward_dynamics.py).
     """
 
     def __init__(self, mechanism: 'Mechanism', kernels: 'ReferenceKernels',
-                 continuation_step: float) -> None:
+                 continuation_step: float, whole: str = 'dynamics') -> None:
         m = self.mechanism = mechanism
         self.kernels = kernels
+        self.whole_name = whole
+        self.whole = getattr(kernels, whole)
         self.limits = joint_step_limits(m, continuation_step)
         self.bounds = correction_bounds(self.limits)
         self.wrapping = wrapping_actuators(m)
@@ -87,9 +73,11 @@ class SampleSolver:
         self.layout = BasisLayout(m)
 
     def solve(self, state: State, target: Sequence[float], qd: Sequence[float] | None = None,
-              qdd: Sequence[float] | None = None,
-              sample: int | None = None) -> tuple['PoseRecord', State]:
-        """(PoseRecord at ``target``, new state) by continuation from ``state``."""
+              qdd: Sequence[float] | None = None, sample: int | None = None,
+              project: bool = True) -> tuple['PoseRecord', State]:
+        """(PoseRecord at ``target``, new state) by continuation from ``state``. Without
+        ``project``, a redundant mechanism's primary actuators are put at their targets and
+        the others follow from the closure (their targets are not used)."""
         m, limits = self.mechanism, self.limits
         qd = self.zeros if qd is None else qd
         qdd = self.zeros if qdd is None else qdd
@@ -115,7 +103,8 @@ class SampleSolver:
                     goal = intermediate_goal(m, state, target, cap / ratio)
                     predicted = predict(state[0], state[1], goal).predicted
             try:
-                record, new_state, closed = self.step(predicted, goal, final, qd, qdd, sample)
+                record, new_state, closed = self.step(predicted, goal, final and project, qd,
+                                                      qdd, sample)
             except ClosureError as exc:
                 if final:
                     raise
@@ -159,8 +148,9 @@ class SampleSolver:
     def step(self, predicted: Sequence[float], goal: Sequence[float], final: bool,
              qd: Sequence[float], qdd: Sequence[float],
              sample: int | None) -> tuple['PoseRecord', State, Sequence[float]]:
-        """One continuation step: close the loops from ``predicted``, check, and on the final
-        step of a redundant mechanism project onto ``goal``. Returns (PoseRecord, new state,
+        """One continuation step: close the loops from ``predicted``, check, and when
+        ``final`` (the final step, projected) for a redundant mechanism project onto
+        ``goal``. Returns (PoseRecord, new state,
         the pose Newton closed before any projection)."""
         m = self.mechanism
         q, record, iterations, ok = self.close(predicted, goal, qd, qdd)
@@ -182,14 +172,14 @@ class SampleSolver:
         where Newton stopped. The cheap closure kernel is used where the pose is probably
         not closed (a prediction, or after an increment of LIKELY_CLOSED or more); after a
         small increment, or when ``likely_closed``, the whole record is evaluated at once."""
-        kernels, tol, free = self.kernels, self.tolerance, self.free
+        kernels, tol, free, evaluate = self.kernels, self.tolerance, self.free, self.whole
         whole = likely_closed
-        # a ClosureRecord while the loops are probably not closed, a PoseRecord once they are
-        record: Any = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
+        # a ClosureRecord while the loops are probably not closed, a whole record once they are
+        record: Any = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
             if loops_closed(record.worst, record.least_cosine, tol):
                 if not whole:
-                    record = kernels.dynamics(q, goal, qd, qdd)
+                    record = evaluate(q, goal, qd, qdd)
                 return q, record, iteration, True
             if iteration == NEWTON_ITERATIONS:
                 break
@@ -203,9 +193,9 @@ class SampleSolver:
             for k, j in enumerate(free):
                 q[j] = q[j] - increment[k] * factor
             whole = size * factor < LIKELY_CLOSED
-            record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
+            record = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         if not whole:
-            record = kernels.dynamics(q, goal, qd, qdd)
+            record = evaluate(q, goal, qd, qdd)
         return q, record, iteration, False
 
     def project(self, q: Sequence[float], record: 'PoseRecord', target: Sequence[float],
