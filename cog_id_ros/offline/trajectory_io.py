@@ -127,8 +127,9 @@ def _read_text(path):
     return text
 
 
-def _classify_header(path, names, joints, active_joints):
-    """Map the header to used columns; returns ({name: index}, notes)."""
+def _classify_header(path, names, joints, active_joints, fields=FIELDS, required='position'):
+    """Map the header to used columns (``<joint>.<field>`` for ``fields``; ``required`` the
+    field every active joint must have); returns ({name: index}, notes)."""
     joints = list(joints)
     active = list(active_joints)
     joint_set = set(joints)
@@ -147,7 +148,7 @@ def _classify_header(path, names, joints, active_joints):
             used[name] = i
             continue
         joint, dot, field = name.rpartition('.')
-        if dot and field in FIELDS:
+        if dot and field in fields:
             if joint not in joint_set:
                 raise TrajectoryError(
                     path,
@@ -164,10 +165,10 @@ def _classify_header(path, names, joints, active_joints):
         raise TrajectoryError(path, f"missing column '{TIME}' (seconds, strictly increasing)",
                               header=True, column=TIME)
     for joint in active:
-        col = joint_column(joint, 'position')
+        col = joint_column(joint, required)
         if col not in used:
             raise TrajectoryError(
-                path, f"missing column '{col}' (the position of active joint {joint})",
+                path, f"missing column '{col}' (the {required} of active joint {joint})",
                 header=True, column=col)
     notes = []
     if ignored_inactive:
@@ -175,7 +176,7 @@ def _classify_header(path, names, joints, active_joints):
                      + ': not an active joint (active: ' + ', '.join(active) + ')')
     if ignored_other:
         notes.append('ignoring column(s) ' + _name_list(ignored_other)
-                     + ': not time or <joint>.position|velocity|acceleration')
+                     + ': not time or <joint>.' + '|'.join(fields))
     return used, notes
 
 
@@ -271,9 +272,14 @@ def _locate_bad_cell(path, lines, n_columns, order, numpy_message):
     raise TrajectoryError(path, f'cannot parse: {numpy_message}', row=row)
 
 
-def read_trajectory(path: PathLike, joints: Sequence[str],
-                    active_joints: Sequence[str]) -> 'Trajectory':
+def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequence[str],
+                    fields: Sequence[str] = FIELDS, required: str = 'position'
+                    ) -> 'Trajectory':
     """Read and validate a trajectory CSV for a mechanism (``joints``, ``active_joints``).
+
+    ``fields``: the ``<joint>.<field>`` columns read (a trajectory's position, velocity and
+    acceleration; ``cog_id_simulate`` reads an efforts file with effort, position and
+    velocity); ``required``: the field every active joint must have a column of.
 
     Raises :class:`TrajectoryError` naming the row and column of the first problem:
     a missing, duplicate or unknown column, a ragged or blank row, a cell that is not a
@@ -286,9 +292,9 @@ def read_trajectory(path: PathLike, joints: Sequence[str],
     del text   # a million-row file: keep only the lines
     if not lines:
         raise TrajectoryError(path, 'the file is empty; expected a header row such as '
-                              f"'{TIME},{joint_column(active_joints[0], 'position')}'", line=1)
+                              f"'{TIME},{joint_column(active_joints[0], required)}'", line=1)
     names = [name.strip() for name in _cells(lines[0])]
-    used, notes = _classify_header(path, names, joints, active_joints)
+    used, notes = _classify_header(path, names, joints, active_joints, fields, required)
     if len(lines) < 2:
         raise TrajectoryError(path, 'no data rows after the header', header=True)
     order = sorted(used.items(), key=lambda kv: kv[1])

@@ -1,0 +1,512 @@
+"""cog_id_simulate: the motion a closed-link mechanism makes under given actuator efforts.
+
+    cog_id_simulate --params-file config/X.yaml --input efforts.csv --output motion.csv \
+        [--time-step 0.001] [--initial-state trajectory.csv] [--plot motion.png \
+        [--reference motion.csv]]
+
+The run, step by step (:func:`run`): the paths checked, the mechanism loaded, the efforts
+read (the torque tool's output format, :mod:`cog_id_ros.offline.trajectory_io`), each
+step's effort found by the hold rule (:func:`step_efforts`), the initial state chosen
+(:func:`initial_state`), the motion integrated by :class:`cog_id_ros.Simulation` and
+written row by row to a temporary file, the plot drawn, both renamed together, a summary
+printed. No ROS import.
+"""
+
+import argparse
+import contextlib
+import math
+import os
+import sys
+import time as _time
+
+import numpy as np
+
+from ..core.kernels import BACKENDS
+from . import atomic_files, outputs, samples, trajectory_io
+from .console import (
+    EXIT_BROKEN_PIPE,
+    EXIT_INPUT,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_PARAMS,
+    EXIT_USAGE,
+    EXIT_WRITE,
+    Parser,
+    ToolError,
+    load_mechanism,
+    one_line,
+    output_target,
+    run_main,
+)
+from .progress import PROGRESS_MIN_SAMPLES, ProgressBar
+from .stop_signals import Interrupted, StopSignals
+from .trajectory_io import EFFORT, TIME, TrajectoryError, joint_column
+
+PROG = 'cog_id_simulate'
+TRACEBACK_ENV = 'COG_ID_SIMULATE_TRACEBACK'
+DEFAULT_TIME_STEP = 0.001
+#: the longest step cog_id_ros.Simulation takes, s
+MAX_TIME_STEP = 1.0
+#: more steps than this is refused (a 1e9 s file at 1 ms): a larger --time-step, or less time
+MAX_STEPS = 100_000_000
+#: rows written to the output at a time
+BLOCK = 10_000
+#: an input time within this fraction of a step of a step boundary is on it
+GRID_TOLERANCE = 1e-9
+
+EPILOG = f"""\
+input CSV (the output of cog_id_torques; comma-separated, header row first):
+  time              seconds, strictly increasing (uneven steps allowed)
+  <joint>.effort    required for every active joint (N m or N): the effort of row i
+                    acts from time[i] until time[i+1] (zero-order hold), the last
+                    row's for one step
+  <joint>.position  optional, every active joint or none: the first row's values are
+  <joint>.velocity  the initial state (the other rows must hold numbers, and are not
+                    used); without them: initial_positions, at rest
+  Other columns are ignored with a note (an unknown joint's is an error).
+
+steps: one every --time-step from the first input time to the last (the last step
+  that ends at or before it). A step within one input row's interval holds that
+  row's effort exactly; a step that spans a change of effort (input times off the
+  step grid, or rows closer than a step) holds the time average of the efforts it
+  spans (the same impulse), with a note.
+
+--initial-state CSV: a trajectory file (the input of cog_id_torques) whose first
+  row gives the initial positions and velocities of the active joints (velocities
+  estimated as cog_id_torques estimates them when the file has none); it takes the
+  place of position/velocity columns of --input.
+
+output CSV: time, then <joint>.position and <joint>.velocity for every joint of the
+  mechanism (mechanism.joints order), one row per step and the initial state first,
+  every value at full precision; written to a temporary file and renamed.
+
+--plot FILE: the positions of the active joints against time; with --reference
+  MOTION.csv (a motion or trajectory file with the active joints' positions) the
+  reference too, and the difference simulated - reference (linear interpolation at the
+  step times, within the reference's time span).
+
+exit status:
+  {EXIT_OK}  success
+  {EXIT_INPUT}  an input was rejected (a missing, duplicate or unknown column, an empty
+     or non-numeric cell, NaN or infinity, time not strictly increasing, an
+     initial state that does not close the loops), or the simulation stopped (a
+     singular pose, a loop that cannot close): the line names the row, column or
+     time
+  {EXIT_USAGE}  command line: bad option, an input not readable, an output directory
+     missing, an output that is a FIFO/device/socket, too many steps
+  {EXIT_PARAMS}  the parameter file cannot be read or honoured
+  {EXIT_WRITE}  writing an output file failed (the message names --output or --plot)
+  {EXIT_INTERNAL} an internal error (a bug; one line, set {TRACEBACK_ENV}=1 for the traceback)
+  {EXIT_INTERRUPTED} Ctrl-C, 143 SIGTERM, 129 SIGHUP: temporary files removed, no output
+     written; {EXIT_BROKEN_PIPE} stdout closed before the summary
+"""
+
+
+def finite_step(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+    if not 0 < value <= MAX_TIME_STEP:      # also NaN
+        raise argparse.ArgumentTypeError(f'must be > 0 and at most {MAX_TIME_STEP:g} s, got '
+                                         f'{text!r}')
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = Parser(
+        prog=PROG,
+        description='The motion of a closed-link mechanism under given actuator efforts '
+                    '(forward dynamics, classic RK4, every passive joint solved from the '
+                    'closure): efforts CSV in, motion CSV and an optional plot out.',
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--params-file', required=True, metavar='YAML',
+                        help='mechanism parameter file (ROS 2 parameter YAML, e.g. '
+                             'config/paper_four_bar_a.yaml)')
+    parser.add_argument('--input', required=True, metavar='CSV',
+                        help='efforts CSV (what cog_id_torques writes)')
+    parser.add_argument('--output', required=True, metavar='CSV',
+                        help='motion CSV to write (replaced only when the run succeeds)')
+    parser.add_argument('--time-step', type=finite_step, default=DEFAULT_TIME_STEP,
+                        metavar='S', help=f'integration step, s (default {DEFAULT_TIME_STEP})')
+    parser.add_argument('--initial-state', metavar='CSV',
+                        help='a trajectory CSV whose first row is the initial state (e.g. '
+                             'the trajectory cog_id_torques was given)')
+    parser.add_argument('--plot', metavar='FILE',
+                        help="also draw the active joints' positions against time (format "
+                             'from the extension: png, pdf, svg, ...)')
+    parser.add_argument('--reference', metavar='CSV',
+                        help='a motion to compare with: drawn in --plot with the difference, '
+                             'and the largest difference printed')
+    parser.add_argument('--node-name', default=None, metavar='NAME',
+                        help='node entry of the parameter file to read (default: the '
+                             "core's default, which also accepts /**)")
+    parser.add_argument('--backend', choices=BACKENDS, default='auto',
+                        help='who computes the kernels (as cog_id_torques); default auto')
+    parser.add_argument('--no-progress', action='store_true',
+                        help='no progress bar (it is drawn on stderr only when stderr is a '
+                             f'terminal and the run has over {PROGRESS_MIN_SAMPLES:,} steps)')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns the exit status. Never prints a traceback."""
+    args = build_parser().parse_args(argv)
+    return run_main(PROG, TRACEBACK_ENV,
+                    lambda signals: run(args, sys.stdout, sys.stderr, signals),
+                    stopped='no output written',
+                    memory_hint='split the input, or use a larger --time-step')
+
+
+def step_count(time: np.ndarray, h: float) -> int:
+    """Steps of ``h`` from the first time to the last (the last that ends at or before it)."""
+    span = float(time[-1] - time[0])
+    return int(math.floor(span / h + GRID_TOLERANCE)) if span > 0 else 0
+
+
+def step_efforts(time: np.ndarray, efforts: np.ndarray, h: float, n_steps: int
+                 ) -> tuple[np.ndarray, int]:
+    """The effort each of ``n_steps`` steps of ``h`` from ``time[0]`` holds, ``(n_steps, M)``,
+    and how many steps span a change of effort.
+
+    Row i's effort acts from ``time[i]`` until ``time[i + 1]`` (the last row's for one
+    step). A step inside one row's interval (to GRID_TOLERANCE of a step) holds that row's
+    effort bit for bit; a step that spans a change holds the time average over the step."""
+    starts = time[0] + h * np.arange(n_steps)
+    ends = time[0] + h * np.arange(1, n_steps + 1)
+    tol = GRID_TOLERANCE * h
+    first = np.searchsorted(time, starts + tol, side='right') - 1
+    last = np.searchsorted(time, ends - tol, side='left') - 1
+    held = efforts[first].copy()
+    spans = np.flatnonzero(last > first)
+    if spans.size:
+        bounds = np.append(time, time[-1] + h)
+        for k in spans.tolist():
+            rows = np.arange(first[k], last[k] + 1)
+            lo = np.maximum(bounds[rows], starts[k])
+            hi = np.minimum(bounds[rows + 1], ends[k])
+            held[k] = (hi - lo) @ efforts[rows] / (ends[k] - starts[k])
+    return held, int(spans.size)
+
+
+def _columns(traj, active, field):
+    """``(N, M)`` of the ``field`` columns of every active joint, or None when there are none;
+    ToolError naming the missing ones when only some joints have one."""
+    names = [joint_column(j, field) for j in active]
+    have = [name for name in names if name in traj.columns]
+    if not have:
+        return None
+    if len(have) < len(names):
+        missing = [name for name in names if name not in traj.columns]
+        raise ToolError(f"{traj.path}: has {', '.join(have)} but not {', '.join(missing)}: "
+                        f'the initial state needs the {field} of every active joint (or of '
+                        'none)', EXIT_INPUT)
+    return np.column_stack([traj.columns[name] for name in names])
+
+
+def initial_state(args, mech, traj, stderr) -> tuple[list | None, list | None, str]:
+    """(active positions or None, active velocities or None, where they come from)."""
+    active = list(mech.active_joints)
+    if args.initial_state:
+        try:
+            state = trajectory_io.read_trajectory(
+                args.initial_state, list(mech.joints) + list(mech.closure_joints), active)
+            q, qd, _, estimated = samples.setpoints(state, active)
+        except TrajectoryError as exc:
+            raise ToolError(f'--initial-state {exc}', EXIT_INPUT) from None
+        except OSError as exc:
+            raise ToolError(f'--initial-state {args.initial_state}: cannot read: '
+                            f'{exc.strerror or exc}', EXIT_USAGE) from None
+        if abs(state.time[0] - traj.time[0]) > GRID_TOLERANCE * args.time_step:
+            print(f'{PROG}: note: --initial-state starts at t = {state.time[0]!r} s, --input '
+                  f'at t = {traj.time[0]!r} s: the state of its first row is taken as the '
+                  'state at the first input time', file=stderr)
+        how = 'estimated' if estimated else 'given'
+        return (q[0].tolist(), qd[0].tolist(),
+                f'row 1 of {args.initial_state} (velocities {how})')
+    q = _columns(traj, active, 'position')
+    qd = _columns(traj, active, 'velocity')
+    if q is None and qd is None:
+        return None, None, 'initial_positions, at rest'
+    where = (('positions' if q is not None else '') + (' and ' if q is not None and qd is not None
+             else '') + ('velocities' if qd is not None else ''))
+    rest = ('' if q is not None else ', positions initial_positions') + (
+        '' if qd is not None else ', at rest')
+    return (None if q is None else q[0].tolist(), None if qd is None else qd[0].tolist(),
+            f'{where} of row 1 of {args.input}{rest}')
+
+
+def read_efforts(args, mech, stderr):
+    """The efforts file: (Trajectory, efforts (N, M)); ToolError naming a bad row/column."""
+    active = list(mech.active_joints)
+    try:
+        traj = trajectory_io.read_trajectory(
+            args.input, list(mech.joints) + list(mech.closure_joints), active,
+            fields=(EFFORT, 'position', 'velocity'), required=EFFORT)
+    except TrajectoryError as exc:
+        hint = ''
+        if exc.column and exc.column.endswith('.' + EFFORT) and exc.reason.startswith('empty'):
+            hint = ('; cog_id_torques --skip-invalid leaves the efforts of a row it could not '
+                    'solve empty: fix that row of its input, or remove the row')
+        raise ToolError(f'{exc}{hint}', EXIT_INPUT) from None
+    except OSError as exc:
+        raise ToolError(f'--input {args.input}: cannot read: {exc.strerror or exc}',
+                        EXIT_USAGE) from None
+    for note in traj.notes:
+        print(f'{PROG}: note: {args.input}: {note}', file=stderr)
+    return traj, np.column_stack([traj.columns[joint_column(j, EFFORT)] for j in active])
+
+
+def read_reference(args, mech, time):
+    """The --reference positions of the active joints at the step times ``time``
+    (linear interpolation; NaN outside the reference's time span), or None."""
+    if not args.reference:
+        return None
+    active = list(mech.active_joints)
+    try:
+        ref = trajectory_io.read_trajectory(
+            args.reference, list(mech.joints) + list(mech.closure_joints), active)
+    except TrajectoryError as exc:
+        raise ToolError(f'--reference {exc}', EXIT_INPUT) from None
+    except OSError as exc:
+        raise ToolError(f'--reference {args.reference}: cannot read: {exc.strerror or exc}',
+                        EXIT_USAGE) from None
+    tol = GRID_TOLERANCE * args.time_step
+    inside = (time >= ref.time[0] - tol) & (time <= ref.time[-1] + tol)
+    if not inside.any():
+        raise ToolError(f'--reference {args.reference}: its times ({ref.time[0]!r} .. '
+                        f"{ref.time[-1]!r} s) do not overlap the simulation's ({time[0]!r} .. "
+                        f'{time[-1]!r} s)', EXIT_INPUT)
+    values = np.full((time.size, len(active)), np.nan)
+    for k, joint in enumerate(active):
+        values[inside, k] = np.interp(time[inside], ref.time,
+                                      ref.columns[joint_column(joint, 'position')])
+    return values
+
+
+def _check_steps(args, time):
+    """The number of steps; ToolError when the run cannot be made with this --time-step."""
+    h = args.time_step
+    n_steps = step_count(time, h)
+    if n_steps > MAX_STEPS:
+        raise ToolError(f'--time-step {h!r}: {n_steps:,} steps from t = {time[0]!r} to '
+                        f'{time[-1]!r} s, more than {MAX_STEPS:,}: use a larger --time-step or '
+                        'split the input', EXIT_USAGE)
+    largest = float(max(abs(time[0]), abs(time[-1])))
+    if np.spacing(largest) * 1e3 > h:
+        raise ToolError(f'--time-step {h!r}: too small for times of {largest!r} s (a double '
+                        'there is not fine enough to count steps): subtract the start time '
+                        'from the time column', EXIT_USAGE)
+    return n_steps
+
+
+def _check_inputs(args):
+    for option in ('initial_state', 'reference'):
+        path = getattr(args, option)
+        name = '--' + option.replace('_', '-')
+        if path is not None and not os.path.isfile(path):
+            what = 'no such file' if not os.path.exists(path) else 'not a regular file'
+            raise ToolError(f'{name} {path}: {what}', EXIT_USAGE)
+        if path is not None and os.path.exists(args.output) and os.path.samefile(
+                path, output_target('--output', args.output)[0]):
+            raise ToolError(f'--output {args.output}: is the {name} file', EXIT_USAGE)
+
+
+def _simulation(args, mech):
+    import cog_id_ros
+    try:
+        return cog_id_ros.Simulation(mech, time_step=args.time_step, backend=args.backend)
+    except cog_id_ros.CogIdError as exc:
+        raise ToolError(f'{args.params_file}: cannot be simulated: {one_line(exc)}',
+                        EXIT_PARAMS) from None
+
+
+def _reset(sim, q0, qd0, source):
+    import cog_id_ros
+    try:
+        sim.reset(q0, qd0)
+    except cog_id_ros.CogIdError as exc:
+        raise ToolError(f'the initial state ({source}) cannot be used: {one_line(exc)}',
+                        EXIT_INPUT) from None
+
+
+def _state(sim) -> list[float]:
+    """Positions and velocities of every joint, interleaved per joint (the output's order)."""
+    out = []
+    for q, qd in zip(sim.joint_positions(), sim.joint_velocities()):
+        out += (float(q), float(qd))
+    return out
+
+
+def _write_block(f, block):
+    cols = [list(map(repr, block[:, c].tolist())) for c in range(block.shape[1])]
+    f.write('\n'.join(map(','.join, zip(*cols))) + '\n')
+
+
+def integrate(args, sim, mech, traj, held, f, progress, keep_active):
+    """Step the simulation through ``held`` efforts, writing the motion to ``f``; returns the
+    step times and (with ``keep_active``) the active joints' positions ``(n_steps + 1, M)``."""
+    import cog_id_ros
+    n_steps = held.shape[0]
+    time = traj.time[0] + args.time_step * np.arange(n_steps + 1)
+    active = [list(mech.joints).index(j) for j in mech.active_joints]
+    kept = np.empty((n_steps + 1, len(active))) if keep_active else None
+    f.write(','.join([TIME] + [joint_column(j, field) for j in mech.joints
+                               for field in ('position', 'velocity')]) + '\n')
+    block = np.empty((min(BLOCK, n_steps + 1), 1 + 2 * len(mech.joints)))
+    filled = 0
+    residual = sim.closure_residual
+    for k in range(n_steps + 1):
+        if k:
+            try:
+                sim.step(held[k - 1])
+            except cog_id_ros.CogIdError as exc:
+                row = int(np.searchsorted(traj.time, time[k - 1], side='right'))
+                raise ToolError(f'{args.input}: step {k:,} (the efforts of row {row}, line '
+                                f'{row + 1} of the file): {one_line(exc)}', EXIT_INPUT) from None
+        residual = max(residual, sim.closure_residual)
+        block[filled, 0] = time[k]
+        block[filled, 1:] = _state(sim)
+        if kept is not None:
+            kept[k] = block[filled, 1 + 2 * np.array(active)]
+        filled += 1
+        if filled == block.shape[0] or k == n_steps:
+            if not np.isfinite(block[:filled]).all():
+                raise ToolError(f'{args.input}: the motion left the range of a double by t = '
+                                f'{time[k]!r} s: the efforts are too large', EXIT_INPUT)
+            _write_block(f, block[:filled])
+            filled = 0
+            progress.update(k)
+    return time, kept, residual
+
+
+def _note_holds(args, spanning, n_steps, stderr):
+    if spanning:
+        print(f'{PROG}: note: {spanning:,} of {n_steps:,} steps span a change of effort (the '
+              f'input times are off the grid of --time-step {args.time_step!r} s, or closer '
+              'than a step): those steps hold the time average of the efforts they span',
+              file=stderr)
+
+
+def run(args, stdout, stderr, signals=None):
+    """The tool's run, step by step: returns EXIT_OK, or raises ToolError (one line, an exit
+    status) or Interrupted."""
+    signals = signals if signals is not None else StopSignals()
+    started = _time.perf_counter()
+    plot_format = outputs.check_paths(args)
+    _check_inputs(args)
+    mech, _ = load_mechanism(args, solver=False)
+    traj, efforts = read_efforts(args, mech, stderr)
+    n_steps = _check_steps(args, traj.time)
+    held, spanning = step_efforts(traj.time, efforts, args.time_step, n_steps)
+    _note_holds(args, spanning, n_steps, stderr)
+    q0, qd0, source = initial_state(args, mech, traj, stderr)
+    reference = read_reference(args, mech, traj.time[0] + args.time_step
+                               * np.arange(n_steps + 1))
+    sim = _simulation(args, mech)
+    _reset(sim, q0, qd0, source)
+    progress = ProgressBar(n_steps, stderr, ProgressBar.wanted(n_steps, stderr, args.no_progress),
+                           label='simulating', unit='steps')
+    current = ('--output', args.output)
+    try:
+        with contextlib.ExitStack() as stack:
+            tmp_csv = stack.enter_context(atomic_files.atomic_output(args.output))
+            with open(tmp_csv, 'w', encoding='utf-8', newline='') as f:
+                try:
+                    time, active_q, residual = integrate(args, sim, mech, traj, held, f, progress,
+                                               bool(args.plot or args.reference))
+                finally:
+                    progress.close()
+            if args.plot:
+                current = ('--plot', args.plot)
+                tmp_plot = stack.enter_context(atomic_files.atomic_output(args.plot))
+                _plot(args, mech, tmp_plot, plot_format, time, active_q, reference, source)
+            signals.deferring = True        # the renames (at the end of the with) go together
+    except OSError as exc:
+        signals.deferring = False
+        option, path = current
+        what = exc if isinstance(exc, atomic_files.OutputPathError) else \
+            f'cannot write: {exc.strerror or one_line(exc)}'
+        raise ToolError(f'{option} {path}: {what}', EXIT_WRITE) from None
+    finally:
+        signals.deferring = False
+    if signals.pending:
+        raise Interrupted(signals.pending, outputs_written=True)
+    elapsed = _time.perf_counter() - started
+    _print_summary(args, mech, stdout, time, active_q if active_q is not None else
+                   np.array([sim.positions]), reference, (source, residual), elapsed)
+    return EXIT_OK
+
+
+def _plot(args, mech, path, fmt, time, active_q, reference, source):
+    from . import plotting
+    try:
+        plotting.plot_motion(path, time, active_q, list(mech.active_joints),
+                             [kind.unit for kind in mech.active_kinds], title=mech.name,
+                             subtitle=f'{os.path.basename(args.input)} held over steps of '
+                                      f'{args.time_step:g} s; initial state: {source}',
+                             reference=reference, fmt=fmt)
+    except (OSError, MemoryError):
+        raise
+    except Exception as exc:     # matplotlib refusing the data
+        raise ToolError(f'--plot {args.plot}: cannot draw the plot: {type(exc).__name__}: '
+                        f'{one_line(exc)[:200]}', EXIT_WRITE) from None
+
+
+def differences(active_q, reference, time):
+    """Per active joint: (largest |simulated - reference|, its time), or None where the
+    reference covers no step."""
+    out = []
+    diff = np.abs(active_q - reference)
+    for k in range(diff.shape[1]):
+        col = diff[:, k]
+        ok = np.isfinite(col)
+        if not ok.any():
+            out.append(None)
+            continue
+        i = int(np.flatnonzero(ok)[np.argmax(col[ok])])
+        out.append((float(col[i]), float(time[i])))
+    return out
+
+
+def _print_summary(args, mech, stdout, time, active_q, reference, state, elapsed):
+    n_steps = time.size - 1
+    source, residual = state
+    lines = [f'{mech.name}: {n_steps:,} steps of {args.time_step:g} s, t = {time[0]:.6g} .. '
+             f'{time[-1]:.6g} s; initial state: {source}',
+             f'loops closed at every step: largest closure residual {residual:.3g} '
+             f'(closure_tolerance {mech.closure_tolerance:g})']
+    units = [kind.unit for kind in mech.active_kinds]
+    final = active_q[-1]
+    header = ['joint', 'final position'] + (['max |simulated - reference|', 'at'] if
+                                             reference is not None else [])
+    rows = [header]
+    diffs = differences(active_q, reference, time) if reference is not None else None
+    for k, joint in enumerate(mech.active_joints):
+        row = [joint, f'{final[k]:.6g} {units[k]}']
+        if diffs is not None:
+            d = diffs[k]
+            row += ['n/a (outside the reference)', ''] if d is None else \
+                [f'{d[0]:.3g} {units[k]}', f't = {d[1]:.6g} s']
+        rows.append(row)
+    widths = [max(len(r[c]) for r in rows) for c in range(len(header))]
+    lines += ['  '.join(cell.ljust(w) for cell, w in zip(r, widths)).rstrip() for r in rows]
+    wrote = ', '.join([args.output] + ([args.plot] if args.plot else []))
+    span = float(time[-1] - time[0])
+    lines.append(f'wrote {wrote}  ({elapsed:.2f} s, {n_steps / elapsed:,.0f} steps/s'
+                 + (f', {span / elapsed:.3g}x real time)' if span > 0 else ')'))
+    if stdout is None:
+        raise BrokenPipeError('stdout is closed')
+    try:
+        stdout.write('\n'.join(lines) + '\n')
+        stdout.flush()
+    except BrokenPipeError:
+        raise
+    except OSError as exc:
+        raise ToolError(f'the outputs are written, but the summary cannot be printed on '
+                        f'stdout: {exc.strerror or exc}', EXIT_WRITE) from None
+
+
+if __name__ == '__main__':
+    sys.exit(main())
