@@ -72,6 +72,13 @@ steps: one every --time-step from the first input time to the last (the last ste
   step grid, or rows closer than a step) holds the time average of the efforts it
   spans (the same impulse), with a note.
 
+--between-rows linear: the rows are samples of a continuous effort (cog_id_torques
+  writes the torque at each row's time), joined by straight lines; each step holds
+  the mean of the line over the step. A sampled effort held from its own time on
+  lags the curve by half a step: the motion it gives is off by O(step), which an
+  open-loop unstable mechanism (the paper's upright four-bar) amplifies until it
+  falls; the mean of the line is off by O(step^2) only.
+
 --initial-state CSV: a trajectory file (the input of cog_id_torques) whose first
   row gives the initial positions and velocities of the active joints (velocities
   estimated as cog_id_torques estimates them when the file has none); it takes the
@@ -130,6 +137,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='motion CSV to write (replaced only when the run succeeds)')
     parser.add_argument('--time-step', type=finite_step, default=DEFAULT_TIME_STEP,
                         metavar='S', help=f'integration step, s (default {DEFAULT_TIME_STEP})')
+    parser.add_argument('--between-rows', choices=('hold', 'linear'), default='hold',
+                        help='hold (default): the effort of row i acts from time[i] until '
+                             'time[i+1]; linear: the rows are samples of a continuous effort '
+                             '(what cog_id_torques writes), joined by straight lines, and each '
+                             'step holds their mean over the step (see below)')
     parser.add_argument('--initial-state', metavar='CSV',
                         help='a trajectory CSV whose first row is the initial state (e.g. '
                              'the trajectory cog_id_torques was given)')
@@ -165,28 +177,44 @@ def step_count(time: np.ndarray, h: float) -> int:
     return int(math.floor(span / h + GRID_TOLERANCE)) if span > 0 else 0
 
 
-def step_efforts(time: np.ndarray, efforts: np.ndarray, h: float, n_steps: int
-                 ) -> tuple[np.ndarray, int]:
+def step_efforts(time: np.ndarray, efforts: np.ndarray, h: float, n_steps: int,
+                 linear: bool = False) -> tuple[np.ndarray, int]:
     """The effort each of ``n_steps`` steps of ``h`` from ``time[0]`` holds, ``(n_steps, M)``,
-    and how many steps span a change of effort.
+    and how many steps span a row's time.
 
-    Row i's effort acts from ``time[i]`` until ``time[i + 1]`` (the last row's for one
-    step). A step inside one row's interval (to GRID_TOLERANCE of a step) holds that row's
-    effort bit for bit; a step that spans a change holds the time average over the step."""
+    ``linear`` False (the contract): row i's effort acts from ``time[i]`` until
+    ``time[i + 1]`` (the last row's for one step). A step inside one row's interval (to
+    GRID_TOLERANCE of a step) holds that row's effort bit for bit; a step that spans a change
+    holds the time average over the step. ``linear`` True (``--between-rows linear``): the
+    rows are samples of a continuous effort, joined by straight lines, and each step holds
+    the mean of that line over the step."""
+    n = time.size
     starts = time[0] + h * np.arange(n_steps)
     ends = time[0] + h * np.arange(1, n_steps + 1)
     tol = GRID_TOLERANCE * h
     first = np.searchsorted(time, starts + tol, side='right') - 1
     last = np.searchsorted(time, ends - tol, side='left') - 1
-    held = efforts[first].copy()
+    if linear:
+        nxt = np.minimum(first + 1, n - 1)
+        gap = time[nxt] - time[first]
+        frac = np.divide(0.5 * (starts + ends) - time[first], gap, out=np.zeros(n_steps),
+                         where=gap > 0)
+        held = efforts[first] + frac[:, None] * (efforts[nxt] - efforts[first])
+    else:
+        held = efforts[first].copy()
     spans = np.flatnonzero(last > first)
-    if spans.size:
-        bounds = np.append(time, time[-1] + h)
-        for k in spans.tolist():
-            rows = np.arange(first[k], last[k] + 1)
-            lo = np.maximum(bounds[rows], starts[k])
-            hi = np.minimum(bounds[rows + 1], ends[k])
-            held[k] = (hi - lo) @ efforts[rows] / (ends[k] - starts[k])
+    bounds = np.append(time, time[-1] + h)
+    for k in spans.tolist():
+        rows = np.arange(first[k], last[k] + 1)
+        lo = np.maximum(bounds[rows], starts[k])
+        hi = np.minimum(bounds[rows + 1], ends[k])
+        values = efforts[rows]
+        if linear:
+            nxt = np.minimum(rows + 1, n - 1)
+            gap = np.where(nxt > rows, time[nxt] - time[rows], 1.0)
+            values = values + (((lo + hi) / 2 - time[rows]) / gap)[:, None] * (
+                efforts[nxt] - values)
+        held[k] = (hi - lo) @ values / (ends[k] - starts[k])
     return held, int(spans.size)
 
 
@@ -399,7 +427,8 @@ def run(args, stdout, stderr, signals=None):
     mech, _ = load_mechanism(args, solver=False)
     traj, efforts = read_efforts(args, mech, stderr)
     n_steps = _check_steps(args, traj.time)
-    held, spanning = step_efforts(traj.time, efforts, args.time_step, n_steps)
+    held, spanning = step_efforts(traj.time, efforts, args.time_step, n_steps,
+                                  args.between_rows == 'linear')
     _note_holds(args, spanning, n_steps, stderr)
     q0, qd0, source = initial_state(args, mech, traj, stderr)
     reference = read_reference(args, mech, traj.time[0] + args.time_step
