@@ -20,6 +20,7 @@ if TYPE_CHECKING:   # what __getattr__ below gives, for type checkers and linter
         InverseDynamics,
         MechanismConfigError,
         SetpointError,
+        Simulation,
         SingularConfigurationError,
     )
     from .description import Mechanism
@@ -27,7 +28,7 @@ if TYPE_CHECKING:   # what __getattr__ below gives, for type checkers and linter
 __version__ = '0.1.0'
 __all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',
            'InverseDynamics', 'Mechanism', 'MechanismConfigError', 'SetpointError',
-           'SingularConfigurationError', '__version__']
+           'Simulation', 'SingularConfigurationError', '__version__']
 
 #: the names of __all__ the core gives (Mechanism is the description's: it reads files too)
 _FROM_CORE = frozenset(__all__) - {'Mechanism', '__version__'}

@@ -5,13 +5,16 @@ Where the paper's equations live:
                                   the paper's order; equation_of_motion(): H and B
   eq. (1)-(4)  cog_jacobian.py    g_i, G_i = dg_i/dtheta_m, Gdot_i thetadot_m
   eq. (5)      newton_euler.py    F_i = M_i qddot_i + b_i
+  eq. (7)^-1   forward_dynamics.py  the accelerations the efforts produce (H, B solved)
 and what they stand on: closure.py (loop equations, Newton), joint_motion.py (actuator to
 joint rates), kinematics.py (tree, poses, twists), joints.py (each kind of joint's part in
 them), spatial.py / lane_linalg.py (algebra). mechanism.py reads a mechanism; assembly.py
 and degrees_of_freedom.py analyse it at load.
 Who runs them: sample_solve.py (one sample: continuation, Newton, checks) calling the
 kernels of kernels.py; batch.py (N samples on arrays); inverse_dynamics.py (the solver
-users call, InverseDynamics); inputs.py (what it accepts).
+users call, InverseDynamics); inputs.py (what it accepts); forward_solve.py (forward
+dynamics of one sample or N); simulation.py (Simulation: RK4 on the independent
+coordinates, the loops closed at every stage).
 """
 from .errors import (
     REASONS,
@@ -23,7 +26,8 @@ from .errors import (
 )
 from .inverse_dynamics import Evaluation, InverseDynamics
 from .mechanism import AssemblyWarning, Mechanism
+from .simulation import Simulation
 
 __all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',
            'InverseDynamics', 'Mechanism',
-           'MechanismConfigError', 'SetpointError', 'SingularConfigurationError']
+           'MechanismConfigError', 'SetpointError', 'Simulation', 'SingularConfigurationError']

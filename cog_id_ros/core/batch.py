@@ -24,7 +24,7 @@ from .continuation import correction_ok, fits_one_step, prediction
 from .errors import CogIdError
 from .inputs import check_values, checked_sample, out_of_range
 from .joint_motion import projected_pose
-from .kernels import ClosureRecord, PoseRecord, unpack
+from .kernels import RECORDS, ClosureRecord, unpack
 from .lanes import columns
 from .sample_solve import (
     NEWTON_ITERATIONS,
@@ -69,13 +69,17 @@ class Evaluation:
 
 
 class Batch:
-    """The batch driver of one mechanism, around its per-sample solver."""
+    """The batch driver of one mechanism, around its per-sample solver (and its kernel for
+    closed poses: ``sample_solver.whole_name``, whose records :meth:`positions` returns)."""
 
     def __init__(self, mechanism, sample_solver, joints_at):
         self.mechanism = mechanism
         self.joints_at = joints_at      # the joints as written from the coordinates
         self.serial = sample_solver
-        self.kernels = sample_solver.kernels
+        self.kernels = kernels = sample_solver.kernels
+        name = sample_solver.whole_name
+        self.whole_many = getattr(kernels, name + '_many')
+        self.layout, self.record_type = kernels.layouts[name], RECORDS[name]
 
     def evaluate_one(self, state, q, qd, qdd, on_invalid):
         """(Evaluation of one sample (arrays (1, M)), new state), by the per-sample path."""
@@ -139,7 +143,7 @@ class Batch:
         qdd = np.zeros_like(qa) if qdd is None else qdd
         if n == 0:
             empty = np.zeros((0, m.n_coordinates))
-            flat = self.kernels.dynamics_many(empty, qa, qd, qdd)
+            flat = self.whole_many(empty, qa, qd, qdd)
             return self.record(flat), empty, np.zeros(0, bool), [], state
         invalid = np.zeros(n, bool) if invalid is None else invalid
         knots = self.anchors(state, qa, invalid)                       # 1. serial anchors
@@ -231,8 +235,7 @@ class Batch:
             new_state = state
         changed = np.flatnonzero(redone | ~ok)
         if changed.size:
-            flat[changed] = self.kernels.dynamics_many(positions[changed],
-                                                       *(x[changed] for x in setpoints))
+            flat[changed] = self.whole_many(positions[changed], *(x[changed] for x in setpoints))
         return new_state
 
     def close(self, guess, qa, qd, qdd):
@@ -241,7 +244,7 @@ class Batch:
         dynamics outputs there, converged (N,), redundant mismatch (N,))."""
         m = self.mechanism
         q, converged = self.newton(guess)
-        flat = self.kernels.dynamics_many(q, qa, qd, qdd)
+        flat = self.whole_many(q, qa, qd, qdd)
         converged &= self.closed(self.record(flat))     # (after the last increment too)
         if not m.is_redundant:
             return q, flat, converged, np.zeros(len(q))
@@ -256,7 +259,7 @@ class Batch:
                                    [columns(row) for row in basis.swapaxes(0, 1)],
                                    columns(part.projection))
             q[todo], converged[todo] = self.newton(np.column_stack(moved))
-            flat[todo] = self.kernels.dynamics_many(q[todo], qa[todo], qd[todo], qdd[todo])
+            flat[todo] = self.whole_many(q[todo], qa[todo], qd[todo], qdd[todo])
             converged[todo] &= self.closed(self.record(flat[todo]))
         return q, flat, converged, np.abs(q[:, m.active_index] - qa).max(axis=1)
 
@@ -311,7 +314,7 @@ class Batch:
                                     self.mechanism.closure_tolerance)
 
     def record(self, flat):
-        return unpack(flat, self.kernels.layouts['dynamics'], PoseRecord)
+        return unpack(flat, self.layout, self.record_type)
 
     def continues(self, start_state, qa, positions, free_rows):
         """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for

@@ -16,8 +16,11 @@ from .errors import SetpointError
 #: the types of a control loop's setpoints (the fast path of setpoints)
 _FLOAT = {float}
 
+#: what the three inputs are called in messages: torques' (forward dynamics: q, qd, tau)
+LABELS = ('q', 'qd', 'qdd')
 
-def setpoints(mechanism, wrapping, q, qd, qdd, limits=True):
+
+def setpoints(mechanism, wrapping, q, qd, qdd, limits=True, labels=LABELS):
     """The one way setpoints come in: (q, qd, qdd, single).
 
     One sample: three lists of M floats, checked: SetpointError for a value not finite, a
@@ -56,17 +59,17 @@ def setpoints(mechanism, wrapping, q, qd, qdd, limits=True):
                 and all(-MAX_ANGLE <= q_[a] <= MAX_ANGLE for a in wrapping) \
                 and (not limits or within_limits(mechanism, q_)):
             return q_, qd_, qdd_, True
-    q, qd, qdd, single = setpoint_arrays(mechanism, q, qd, qdd)
+    q, qd, qdd, single = setpoint_arrays(mechanism, q, qd, qdd, labels)
     if not single:
         return q, qd, qdd, False
-    q, qd, qdd = checked_sample(mechanism, wrapping, q, qd, qdd, limits)
+    q, qd, qdd = checked_sample(mechanism, wrapping, q, qd, qdd, limits, labels)
     return q, qd, qdd, True
 
 
-def checked_sample(mechanism, wrapping, q, qd, qdd, limits=True):
+def checked_sample(mechanism, wrapping, q, qd, qdd, limits=True, labels=LABELS):
     """One sample given as arrays (1, M) as three lists of floats, or the SetpointError
     :func:`check_values` finds."""
-    _, errors = check_values(mechanism, wrapping, q, qd, qdd, True, limits)
+    _, errors = check_values(mechanism, wrapping, q, qd, qdd, True, limits, labels)
     if errors:
         raise errors[0]
     return q[0].tolist(), qd[0].tolist(), qdd[0].tolist()
@@ -79,7 +82,7 @@ def rates(mechanism, qd):
     return setpoints(mechanism, (), zeros, qd, zeros, limits=False)[1]
 
 
-def setpoint_arrays(mechanism, q, qd, qdd):
+def setpoint_arrays(mechanism, q, qd, qdd, labels=LABELS):
     """(q, qd, qdd) as float arrays of shape (N, M), and whether it was one sample.
 
     ``q`` is required; ``qd`` and ``qdd`` default to zeros. One sample is (M,), or a
@@ -90,10 +93,10 @@ def setpoint_arrays(mechanism, q, qd, qdd):
     if q is None:
         raise SetpointError(f'q: required, one position per active joint {names}')
     arrays = [_float_array(label, value, m) if value is not None else None
-              for label, value in (('q', q), ('qd', qd), ('qdd', qdd))]
+              for label, value in zip(labels, (q, qd, qdd))]
     single = arrays[0].ndim == 1
     out = []
-    for label, array in zip(('q', 'qd', 'qdd'), arrays):
+    for label, array in zip(labels, arrays):
         if array is None:
             out.append(np.zeros((1 if single else arrays[0].shape[0], m)))
             continue
@@ -111,7 +114,7 @@ def within_limits(mechanism, q):
     return all(lo <= q[a] <= hi for a, lo, hi in mechanism.limited_actuators)
 
 
-def check_values(mechanism, wrapping, q, qd, qdd, single, limits=True):
+def check_values(mechanism, wrapping, q, qd, qdd, single, limits=True, labels=LABELS):
     """SetpointError for the first non-finite entry, revolute position beyond MAX_ANGLE,
     or actuator outside its position limits (unless not ``limits``); returns (per-sample
     bool array, {sample: error})."""
@@ -123,7 +126,7 @@ def check_values(mechanism, wrapping, q, qd, qdd, single, limits=True):
     errors = {}
     for i in np.flatnonzero(~(finite & in_range)):
         where = '' if single else f'sample {i}: '
-        for label, array in (('q', q), ('qd', qd), ('qdd', qdd)):
+        for label, array in zip(labels, (q, qd, qdd)):
             bad = np.flatnonzero(~np.isfinite(array[i]))
             if bad.size:
                 joint = mechanism.active_joints[bad[0]]

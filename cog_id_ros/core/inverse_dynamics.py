@@ -15,6 +15,7 @@ from . import spatial as sp
 from .batch import Batch, Evaluation
 from .cog_jacobian import cog_poses
 from .errors import MechanismConfigError, SetpointError
+from .forward_solve import LABELS, ForwardSolver
 from .inputs import out_of_range, rates, setpoint_arrays, setpoints
 from .joint_motion import active_velocity_map, combine
 from .kernels import kernels_for
@@ -55,6 +56,8 @@ class InverseDynamics:
         self._serial = SampleSolver(solved, kernels, self.continuation_step)
         self._batch = Batch(solved, self._serial, mechanism.joints_at)
         self._poses = PoseSolver(mechanism, self._serial, self._batch)
+        self._forward = ForwardSolver(solved, kernels, self.continuation_step,
+                                      mechanism.joints_at)
         self.reset()
 
     @property
@@ -81,6 +84,30 @@ class InverseDynamics:
         if single:
             return np.array(self._serve_one(q, qd, qdd))
         return self.evaluate(q, qd, qdd).torques
+
+    def forward_dynamics(self, q: ArrayLike, qd: Optional[ArrayLike],
+                         tau: Optional[ArrayLike]) -> np.ndarray:
+        """The accelerations (M,) or (N, M) the efforts ``tau`` (N m or N, active_joints
+        order) produce at positions ``q`` and rates ``qd``, with gravity: eq. (7) solved for
+        qdd (docs/simulation.md). ``qd``, ``tau``: zeros when None.
+
+        The pose is solved as :meth:`torques` solves it (warm start, branch, errors); a
+        redundant mechanism moves by the generalized force of its efforts alone.
+        SingularConfigurationError also for an inertia that cannot be solved.
+        """
+        q, qd, tau, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, tau,
+                                       labels=LABELS)
+        if single:
+            record, self._state = self._forward.one(self._state, q, qd, tau)
+            return np.array(record.accelerations)
+        if len(q) == 0:
+            return np.zeros(q.shape)
+        if len(q) == 1:
+            record, self._state = self._forward.one(self._state, *(x[0].tolist()
+                                                                 for x in (q, qd, tau)))
+            return np.array([record.accelerations])
+        accelerations, self._state = self._forward.many(self._state, q, qd, tau)
+        return accelerations
 
     def sample_torques(self, q: Sequence[float], qd: Optional[Sequence[float]] = None,
                        qdd: Optional[Sequence[float]] = None) -> list:

@@ -1,6 +1,6 @@
 """Kernels: the branch-free per-sample computations, and the backends that run them.
 
-Three kernels do all the arithmetic of a sample; the plain-Python glue of sample_solve.py
+Four kernels do all the arithmetic of a sample; the plain-Python glue of sample_solve.py
 calls them and makes every decision (continuation, Newton's iteration, checks):
 
     prediction(q, basis, goal)        -> PredictionRecord: the continuation's first-order
@@ -11,6 +11,9 @@ calls them and makes every decision (continuation, Newton's iteration, checks):
                                          Jacobian's condition number, the velocity basis,
                                          eqs. (1)-(7) (pipeline.py) and, for redundant
                                          actuation, the projection increment to ``target``
+    forward(q, target, qd, tau)       -> ForwardRecord: dynamics' record with the
+                                         accelerations the efforts tau produce
+                                         (forward_dynamics.py) in place of the torques
 
 Backends (``InverseDynamics(mechanism, backend=...)``):
 
@@ -39,6 +42,7 @@ from . import spatial as sp
 from .continuation import prediction
 from .emitter import c_module_source, python_function
 from .errors import MechanismConfigError
+from .forward_dynamics import forward_dynamics
 from .joint_motion import projection_increment, velocity_basis
 from .lanes import columns, flat
 from .pipeline import inverse_dynamics
@@ -83,6 +87,26 @@ class PoseRecord(NamedTuple):
     projection: tuple   # redundant actuation: projection increment dz to the target; else ()
 
 
+class ForwardRecord(NamedTuple):
+    """A PoseRecord with the accelerations of forward dynamics in place of the torques."""
+    residual: tuple
+    cosines: tuple
+    increment: tuple
+    worst: float
+    least_cosine: float
+    largest_step: float
+    condition: float
+    accelerations: tuple  # thetaddot the efforts produce, active_joints order
+    basis: tuple
+    projection: tuple
+    inertia_condition: float  # of the inertia in the independent coordinates (forward_dynamics.py)
+
+
+#: the record type of each kernel
+RECORDS = {'prediction': PredictionRecord, 'closure': ClosureRecord, 'dynamics': PoseRecord,
+           'forward': ForwardRecord}
+
+
 def closure_record(mechanism, q, ops):
     """(pose, ClosureRecord) at q by the lane code."""
     pose = closure.evaluate(mechanism.model, q, mechanism.free_joints, ops)
@@ -104,6 +128,19 @@ def pose_record(mechanism, q, target, qd, qdd, ops):
                       [basis[j] for j in mechanism.free_joints], projection)
 
 
+def forward_record(mechanism, q, target, qd, tau, ops):
+    """ForwardRecord at q by the lane code: the pose of :func:`pose_record`, and the
+    accelerations the efforts ``tau`` produce at the rates ``qd`` there."""
+    pose, closed = closure_record(mechanism, q, ops)
+    basis = velocity_basis(mechanism, pose)
+    qdd, inertia_condition = forward_dynamics(mechanism, pose, basis, qd, tau, ops)
+    projection = (projection_increment(mechanism, basis, q, target, ops)
+                  if mechanism.is_redundant else [])
+    return ForwardRecord(*closed, pose.lsq.condition_number(), qdd,
+                         [basis[j] for j in mechanism.free_joints], projection,
+                         inertia_condition)
+
+
 def prediction_record(mechanism, q, basis, goal):
     """PredictionRecord from the pose q with velocity basis V (list over joints) to the
     goal of the actuators."""
@@ -118,11 +155,14 @@ def layouts(mechanism):
     n_loops = len(m.model.constraints)
     closing = [('residual', (6 * n_loops,)), ('cosines', (n_loops,)), ('increment', (n_free,)),
                ('worst', ()), ('least_cosine', ()), ('largest_step', ())]
+    pose = [('condition', ()), ('torques', (n_act,)), ('basis', (n_free, dof)),
+            ('projection', (dof,) if m.is_redundant else (0,))]
+    forward = [('accelerations', (n_act,)) if name == 'torques' else (name, shape)
+               for name, shape in pose] + [('inertia_condition', ())]
     return {'prediction': [('predicted', (n,)), ('moved', (n,))],
             'closure': closing,
-            'dynamics': closing + [('condition', ()), ('torques', (n_act,)),
-                                   ('basis', (n_free, dof)),
-                                   ('projection', (dof,) if m.is_redundant else (0,))]}
+            'dynamics': closing + pose,
+            'forward': closing + forward}
 
 
 def width(layout):
@@ -168,6 +208,9 @@ class ReferenceKernels:
     def dynamics(self, q, target, qd, qdd):
         return pose_record(self.mechanism, q, target, qd, qdd, sp.ScalarOps)
 
+    def forward(self, q, target, qd, tau):
+        return forward_record(self.mechanism, q, target, qd, tau, sp.ScalarOps)
+
     def closure_many(self, q):
         return flat(closure_record(self.mechanism, columns(q), sp.ArrayOps)[1], len(q))
 
@@ -175,25 +218,33 @@ class ReferenceKernels:
         return flat(pose_record(self.mechanism, *map(columns, (q, target, qd, qdd)),
                                 sp.ArrayOps), len(q))
 
+    def forward_many(self, q, target, qd, tau):
+        return flat(forward_record(self.mechanism, *map(columns, (q, target, qd, tau)),
+                                   sp.ArrayOps), len(q))
+
 
 def trace(mechanism):
-    """The three kernels run once on symbolic lanes: [(name, params, record type, fields)], what
+    """The four kernels run once on symbolic lanes: [(name, params, record type, fields)], what
     the emitters (emitter.py) write as code."""
     m = mechanism
     graph = Graph()
     q = graph.inputs('q', m.n_coordinates)
     target, qd, qdd = (graph.inputs(name, len(m.active_joints))
                        for name in ('target', 'qd', 'qdd'))
+    tau = graph.inputs('tau', len(m.active_joints))
     flat = graph.inputs('basis', m.n_coordinates * m.dof)
     basis = [flat[j * m.dof:(j + 1) * m.dof] for j in range(m.n_coordinates)]
     predicted = prediction_record(m, q, basis, target)
     _, closed = closure_record(m, q, SymOps)
     whole = pose_record(m, q, target, qd, qdd, SymOps)
+    forward = forward_record(m, q, target, qd, tau, SymOps)
     return [('prediction', [('q', q), ('basis', basis), ('goal', target)], PredictionRecord,
              list(zip(PredictionRecord._fields, predicted))),
             ('closure', [('q', q)], ClosureRecord, list(zip(ClosureRecord._fields, closed))),
             ('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)], PoseRecord,
-             list(zip(PoseRecord._fields, whole)))]
+             list(zip(PoseRecord._fields, whole))),
+            ('forward', [('q', q), ('target', target), ('qd', qd), ('tau', tau)], ForwardRecord,
+             list(zip(ForwardRecord._fields, forward)))]
 
 
 class PythonKernels(ReferenceKernels):
@@ -220,9 +271,10 @@ class NativeKernels(ReferenceKernels):
     def __init__(self, mechanism):
         super().__init__(mechanism)
         module, self.operations = native.load_module(kernel_key(mechanism), self._source)
-        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
+        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord, ForwardRecord)
         self.prediction = module.prediction
         self.closure, self.dynamics = module.closure, module.dynamics
+        self.forward = module.forward
         self.module = module
         self.widths = {name: width(layout) for name, layout in self.layouts.items()}
 
@@ -231,6 +283,9 @@ class NativeKernels(ReferenceKernels):
 
     def dynamics_many(self, q, target, qd, qdd):
         return self._many('dynamics', q, target, qd, qdd)
+
+    def forward_many(self, q, target, qd, tau):
+        return self._many('forward', q, target, qd, tau)
 
     def _many(self, name, *arrays):
         arrays = [np.ascontiguousarray(a, dtype=float) for a in arrays]

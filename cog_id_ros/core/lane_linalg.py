@@ -85,6 +85,12 @@ class QRLeastSquares:
 def solve_spd(a, rhs, ops):
     """Solve A X = RHS for a small symmetric positive-definite A (list of rows of lanes)
     by Cholesky; RHS is a list of rows (each a list of lanes). Returns X as a list of rows."""
+    return cholesky_solve(cholesky(a, ops), rhs, ops)
+
+
+def cholesky(a, ops):
+    """The lower Cholesky factor L of a small symmetric positive-definite A, A = L L^T
+    (list of rows of lanes; a pivot that is not positive gives NaN, as ops.sqrt does)."""
     n = len(a)
     lower = [[0.0] * n for _ in range(n)]
     for i in range(n):
@@ -96,6 +102,12 @@ def solve_spd(a, rhs, ops):
                 lower[i][i] = ops.sqrt(s)
             else:
                 lower[i][j] = s * ops.recip(lower[j][j])
+    return lower
+
+
+def cholesky_solve(lower, rhs, ops):
+    """X with L L^T X = RHS, L from :func:`cholesky`; RHS and X lists of rows of lanes."""
+    n = len(lower)
     m = len(rhs[0]) if rhs else 0
     out = [[0.0] * m for _ in range(n)]
     for c in range(m):

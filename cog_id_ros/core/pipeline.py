@@ -63,13 +63,24 @@ def drift_accelerations(mechanism, pose, s, thetadot):
     """Spatial acceleration of every link when thetaddot_m = 0: the link-level Gdot thetadot
     of eq. (4). The joints' own bias (joint twists turning with their inner body) plus the
     joint accelerations d that keep the loops closed (joint_motion.closure_drift)."""
+    bias, drift = joint_drift(mechanism, pose, s, thetadot)
+    return link_drift(mechanism, pose, bias, drift)
+
+
+def joint_drift(mechanism, pose, s, thetadot):
+    """(bias, d): the links' bias accelerations (joint twists turning with their inner body)
+    and the joint accelerations d that keep the loops closed when thetaddot_m = 0."""
     model = mechanism.model
     qdot = combine(s, thetadot)
     twists = link_twists(model, pose.frames, qdot)
     bias = link_bias_accelerations(model, pose.frames, twists, qdot)
     beta = closure.closure_bias(model, pose.frames, pose.loops, twists, bias, qdot)
-    drift = closure_drift(mechanism, pose, s, beta)
-    drift_twists = link_twists(model, pose.frames, drift)
+    return bias, closure_drift(mechanism, pose, s, beta)
+
+
+def link_drift(mechanism, pose, bias, drift):
+    """The links' spatial accelerations from their bias and the joint accelerations d."""
+    drift_twists = link_twists(mechanism.model, pose.frames, drift)
     return [sp.twist_add_scaled(b, d, 1.0) for b, d in zip(bias, drift_twists)]
 
 

@@ -63,12 +63,16 @@ class SampleSolver:
     """The per-sample solve of one mechanism with one set of kernels.
 
     A state is (q, V): every joint coordinate and the velocity basis there (a list over
-    joints of rows over the primary actuators), as solve() returns it.
+    joints of rows over the primary actuators), as solve() returns it. ``whole``: the kernel
+    that evaluates a closed pose, 'dynamics' (torques from qd, qdd) or 'forward'
+    (accelerations from qd and the efforts, in place of qdd: forward_dynamics.py).
     """
 
-    def __init__(self, mechanism, kernels, continuation_step):
+    def __init__(self, mechanism, kernels, continuation_step, whole='dynamics'):
         m = self.mechanism = mechanism
         self.kernels = kernels
+        self.whole_name = whole
+        self.whole = getattr(kernels, whole)
         self.limits = joint_step_limits(m, continuation_step)
         self.bounds = correction_bounds(self.limits)
         self.wrapping = wrapping_actuators(m)
@@ -78,8 +82,10 @@ class SampleSolver:
         self.zeros = [0.0] * len(m.active_joints)
         self.layout = BasisLayout(m)
 
-    def solve(self, state, target, qd=None, qdd=None, sample=None):
-        """(PoseRecord at ``target``, new state) by continuation from ``state``."""
+    def solve(self, state, target, qd=None, qdd=None, sample=None, project=True):
+        """(PoseRecord at ``target``, new state) by continuation from ``state``. Without
+        ``project``, a redundant mechanism's primary actuators are put at their targets and
+        the others follow from the closure (their targets are not used)."""
         m, limits = self.mechanism, self.limits
         qd = self.zeros if qd is None else qd
         qdd = self.zeros if qdd is None else qdd
@@ -105,7 +111,8 @@ class SampleSolver:
                     goal = intermediate_goal(m, state, target, cap / ratio)
                     predicted = predict(state[0], state[1], goal).predicted
             try:
-                record, new_state, closed = self.step(predicted, goal, final, qd, qdd, sample)
+                record, new_state, closed = self.step(predicted, goal, final and project, qd,
+                                                      qdd, sample)
             except ClosureError as exc:
                 if final:
                     raise
@@ -145,8 +152,9 @@ class SampleSolver:
         return record, state
 
     def step(self, predicted, goal, final, qd, qdd, sample):
-        """One continuation step: close the loops from ``predicted``, check, and on the final
-        step of a redundant mechanism project onto ``goal``. Returns (PoseRecord, new state,
+        """One continuation step: close the loops from ``predicted``, check, and when
+        ``final`` (the final step, projected) for a redundant mechanism project onto
+        ``goal``. Returns (PoseRecord, new state,
         the pose Newton closed before any projection)."""
         m = self.mechanism
         q, record, iterations, ok = self.close(predicted, goal, qd, qdd)
@@ -166,13 +174,13 @@ class SampleSolver:
         where Newton stopped. The cheap closure kernel is used where the pose is probably
         not closed (a prediction, or after an increment of LIKELY_CLOSED or more); after a
         small increment, or when ``likely_closed``, the whole record is evaluated at once."""
-        kernels, tol, free = self.kernels, self.tolerance, self.free
+        kernels, tol, free, evaluate = self.kernels, self.tolerance, self.free, self.whole
         whole = likely_closed
-        record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
+        record = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
             if loops_closed(record.worst, record.least_cosine, tol):
                 if not whole:
-                    record = kernels.dynamics(q, goal, qd, qdd)
+                    record = evaluate(q, goal, qd, qdd)
                 return q, record, iteration, True
             if iteration == NEWTON_ITERATIONS:
                 break
@@ -186,9 +194,9 @@ class SampleSolver:
             for k, j in enumerate(free):
                 q[j] = q[j] - increment[k] * factor
             whole = size * factor < LIKELY_CLOSED
-            record = kernels.dynamics(q, goal, qd, qdd) if whole else kernels.closure(q)
+            record = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         if not whole:
-            record = kernels.dynamics(q, goal, qd, qdd)
+            record = evaluate(q, goal, qd, qdd)
         return q, record, iteration, False
 
     def project(self, q, record, target, qd, qdd, sample):
