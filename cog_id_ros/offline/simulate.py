@@ -252,7 +252,7 @@ def initial_state(args, mech, traj, stderr) -> tuple[list | None, list | None, s
                   'state at the first input time', file=stderr)
         how = 'estimated' if estimated else 'given'
         return (q[0].tolist(), qd[0].tolist(),
-                f'row 1 of {args.initial_state} (velocities {how})')
+                f'row 1 of {os.path.basename(args.initial_state)} (velocities {how})')
     q = _columns(traj, active, 'position')
     qd = _columns(traj, active, 'velocity')
     if q is None and qd is None:
@@ -262,7 +262,7 @@ def initial_state(args, mech, traj, stderr) -> tuple[list | None, list | None, s
     rest = ('' if q is not None else ', positions initial_positions') + (
         '' if qd is not None else ', at rest')
     return (None if q is None else q[0].tolist(), None if qd is None else qd[0].tolist(),
-            f'{where} of row 1 of {args.input}{rest}')
+            f'{where} of row 1 of {os.path.basename(args.input)}{rest}')
 
 
 def read_efforts(args, mech, stderr):
@@ -443,10 +443,12 @@ def run(args, stdout, stderr, signals=None):
             tmp_csv = stack.enter_context(atomic_files.atomic_output(args.output))
             with open(tmp_csv, 'w', encoding='utf-8', newline='') as f:
                 try:
+                    began = _time.perf_counter()
                     time, active_q, residual = integrate(args, sim, mech, traj, held, f, progress,
                                                bool(args.plot or args.reference))
                 finally:
                     progress.close()
+                integrating = _time.perf_counter() - began
             if args.plot:
                 current = ('--plot', args.plot)
                 tmp_plot = stack.enter_context(atomic_files.atomic_output(args.plot))
@@ -464,7 +466,8 @@ def run(args, stdout, stderr, signals=None):
         raise Interrupted(signals.pending, outputs_written=True)
     elapsed = _time.perf_counter() - started
     _print_summary(args, mech, stdout, time, active_q if active_q is not None else
-                   np.array([sim.positions]), reference, (source, residual), elapsed)
+                   np.array([sim.positions]), reference, (source, residual),
+                   (elapsed, integrating))
     return EXIT_OK
 
 
@@ -473,8 +476,9 @@ def _plot(args, mech, path, fmt, time, active_q, reference, source):
     try:
         plotting.plot_motion(path, time, active_q, list(mech.active_joints),
                              [kind.unit for kind in mech.active_kinds], title=mech.name,
-                             subtitle=f'{os.path.basename(args.input)} held over steps of '
-                                      f'{args.time_step:g} s; initial state: {source}',
+                             subtitle=f'{os.path.basename(args.input)} (--between-rows '
+                                      f'{args.between_rows}) over steps of {args.time_step:g} s; '
+                                      f'initial state: {source}',
                              reference=reference, fmt=fmt)
     except (OSError, MemoryError):
         raise
@@ -502,6 +506,7 @@ def differences(active_q, reference, time):
 def _print_summary(args, mech, stdout, time, active_q, reference, state, elapsed):
     n_steps = time.size - 1
     source, residual = state
+    elapsed, integrating = elapsed
     lines = [f'{mech.name}: {n_steps:,} steps of {args.time_step:g} s, t = {time[0]:.6g} .. '
              f'{time[-1]:.6g} s; initial state: {source}',
              f'loops closed at every step: largest closure residual {residual:.3g} '
@@ -523,8 +528,10 @@ def _print_summary(args, mech, stdout, time, active_q, reference, state, elapsed
     lines += ['  '.join(cell.ljust(w) for cell, w in zip(r, widths)).rstrip() for r in rows]
     wrote = ', '.join([args.output] + ([args.plot] if args.plot else []))
     span = float(time[-1] - time[0])
-    lines.append(f'wrote {wrote}  ({elapsed:.2f} s, {n_steps / elapsed:,.0f} steps/s'
-                 + (f', {span / elapsed:.3g}x real time)' if span > 0 else ')'))
+    rate = ((f'; simulated and written at {n_steps / integrating:,.0f} steps/s'
+             + (f', {span / integrating:.3g}x real time' if span > 0 else ''))
+            if n_steps and integrating > 0 else '')
+    lines.append(f'wrote {wrote}  ({elapsed:.2f} s{rate})')
     if stdout is None:
         raise BrokenPipeError('stdout is closed')
     try:
