@@ -6,15 +6,12 @@ subprocess where a user's view does (a signal, the console script).
 """
 import os
 from pathlib import Path
-import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 
-import cog_id_ros
 from cog_id_ros.offline import simulate
 from cog_id_ros.offline import trajectory_io as tio
 
