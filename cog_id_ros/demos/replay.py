@@ -31,7 +31,16 @@ import sys
 import numpy as np
 
 from ..offline import trajectory_io
-from .paper_four_bar import DURATION, ConfigNotFound, G, L, M, config_dir, target_motion
+from .paper_four_bar import (
+    DURATION,
+    ConfigNotFound,
+    G,
+    L,
+    M,
+    config_dir,
+    target_motion,
+    write_csv,
+)
 
 #: the target motion's file, beside the parameter files
 TARGET_FILE = 'paper_four_bar_target.csv'
@@ -95,10 +104,19 @@ def run_tool(name, args):
     return proc.returncode
 
 
-def replay(case, configs, out, h, between='linear', plot=True):
+def target_file(configs, out, h):
+    """The target motion sampled every ``h`` s: config/paper_four_bar_target.csv for 1 ms,
+    else written to ``out`` (the bound assumes torque rows one step apart)."""
+    if h == 0.001:
+        return os.path.join(configs, TARGET_FILE)
+    path = os.path.join(out, f'replay_target_{h:g}.csv')
+    write_csv(path, np.arange(int(round(DURATION / h)) + 1) * h)
+    return path
+
+
+def replay(case, target, configs, out, h, between='linear', plot=True):
     """Run the two tools for ``case``; the replayed motion's CSV, or None when one failed."""
     params = os.path.join(configs, f'paper_four_bar_{case}.yaml')
-    target = os.path.join(configs, TARGET_FILE)
     torques = os.path.join(out, f'replay_{case}_torques.csv')
     motion = os.path.join(out, f'replay_{case}_motion' + ('' if between == 'linear' else
                                                           '_' + between) + '.csv')
@@ -166,7 +184,9 @@ def main(argv: list[str] | None = None) -> int:
                                      description=__doc__.splitlines()[0])
     parser.add_argument('--output-dir', default='out', help='where the files go (default out)')
     parser.add_argument('--time-step', type=float, default=0.001,
-                        help="the simulation step, s (default 0.001, the torques' spacing)")
+                        help="the simulation step and the torque samples' spacing, s (default "
+                             '0.001: config/paper_four_bar_target.csv; another step writes the '
+                             'target motion at that rate to the output directory)')
     args = parser.parse_args(argv)
     try:
         configs = config_dir()
@@ -178,16 +198,18 @@ def main(argv: list[str] | None = None) -> int:
         return NOT_FOUND
     os.makedirs(args.output_dir, exist_ok=True)
     bound = error_bound(args.time_step)
+    target = target_file(configs, args.output_dir, args.time_step)
     rows, ok = [], True
     for case, joints in CASES:
-        motion = replay(case, configs, args.output_dir, args.time_step)
+        motion = replay(case, target, configs, args.output_dir, args.time_step)
         if motion is None:
             return FAILED
         for joint, (err, at) in zip(joints, angle_errors(motion, joints)):
             ok &= err <= bound
-            rows.append(f'({case})   {joint}  {err:9.3g} rad at t = {at:<6.4g}  '
-                        f'{bound:9.3g} rad  {"yes" if err <= bound else "NO"}')
-    held = replay('a', configs, args.output_dir, args.time_step, between='hold', plot=False)
+            where = f'({case})   {joint}  {err:9.3g} rad at t = {at:.4g} s'
+            rows.append(f'{where:<46}{bound:9.3g} rad  {"yes" if err <= bound else "NO"}')
+    held = replay('a', target, configs, args.output_dir, args.time_step, between='hold',
+                  plot=False)
     picture = os.path.join(args.output_dir, 'replay.png')
     draw(picture, os.path.join(args.output_dir, 'replay_a_motion.csv'), held, args.time_step)
     print(f'\nthe Fig. 4 torques replayed in steps of {args.time_step:g} s (--between-rows '
