@@ -52,6 +52,8 @@ MAX_TIME_STEP = 1.0
 MAX_STEPS = 100_000_000
 #: rows written to the output at a time
 BLOCK = 10_000
+#: steps between two redraws of the progress bar
+PROGRESS_EVERY = 1_000
 #: an input time within this fraction of a step of a step boundary is on it
 GRID_TOLERANCE = 1e-9
 
@@ -390,7 +392,8 @@ def integrate(args, sim, mech, traj, held, f, progress, keep_active):
             try:
                 sim.step(held[k - 1])
             except cog_id_ros.CogIdError as exc:
-                row = int(np.searchsorted(traj.time, time[k - 1], side='right'))
+                row = int(np.searchsorted(traj.time, time[k - 1] + GRID_TOLERANCE
+                                          * args.time_step, side='right'))
                 raise ToolError(f'{args.input}: step {k:,} (the efforts of row {row}, line '
                                 f'{row + 1} of the file): {one_line(exc)}', EXIT_INPUT) from None
         residual = max(residual, sim.closure_residual)
@@ -405,6 +408,7 @@ def integrate(args, sim, mech, traj, held, f, progress, keep_active):
                                 f'{time[k]!r} s: the efforts are too large', EXIT_INPUT)
             _write_block(f, block[:filled])
             filled = 0
+        if k % PROGRESS_EVERY == 0 or k == n_steps:
             progress.update(k)
     return time, kept, residual
 

@@ -6,6 +6,7 @@ subprocess where a user's view does (a signal, the console script).
 """
 import os
 from pathlib import Path
+import pty
 import subprocess
 import sys
 
@@ -213,3 +214,77 @@ def test_the_console_script_is_installed():
     assert script.exists()
     proc = subprocess.run([str(script), '--help'], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and 'cog_id_simulate' in proc.stdout
+
+
+# --- the simulation stops, and says where ------------------------------------------------------
+
+SHORT_COUPLER = (ROOT / 'test' / 'offline' / 'test_cli.py').read_text().split(
+    'SHORT_COUPLER = """\\\n')[1].split('"""')[0]
+
+
+def test_a_loop_that_cannot_close_on_the_way_stops_the_run_with_the_step_row_and_time(
+        tmp_path, capsys):
+    """The short-coupler four-bar pushed beyond joint1 = 1.287 rad, where its loop cannot
+    close: status 1, one line naming the step, the input row whose efforts it held, the time
+    and the joint; no output."""
+    params = tmp_path / 'short.yaml'
+    params.write_text(SHORT_COUPLER)
+    src = write_csv(tmp_path / 'push.csv', {'time': [0.0, 0.1, 2.0],
+                                            'joint1.effort': [20.0, 20.0, 20.0]})
+    status, out, err = simulate_in_process(capsys, '--params-file', params, '--input', src,
+                                           '--output', tmp_path / 'm.csv')
+    line = error_line(err)
+    assert status == 1 and out == ''
+    assert 'push.csv: step 129 (the efforts of row 2, line 3 of the file): simulation stopped ' \
+           'at t = 0.129 s' in line
+    assert 'joint1 = 1.28' in line and 'cannot be closed' in line
+    assert sorted(os.listdir(tmp_path)) == ['push.csv', 'short.yaml']
+
+
+def test_efforts_too_large_to_compute_with_stop_the_run(tmp_path, capsys):
+    src = efforts_file(tmp_path, **{'joint3.effort': [1e300, 1e300, 1e300]})
+    status, _, err = simulate_in_process(capsys, '--params-file', PARAMS_A, '--input', src,
+                                         '--output', tmp_path / 'm.csv')
+    assert status == 1 and 'step 1 (the efforts of row 1' in error_line(err)
+    assert 'too large' in error_line(err)
+    assert sorted(os.listdir(tmp_path)) == ['efforts.csv']
+
+
+def test_one_row_gives_the_initial_state_alone(tmp_path, capsys):
+    src = write_csv(tmp_path / 'one.csv', {'time': [5.0], 'joint3.effort': [1.0]})
+    status, out, _ = simulate_in_process(capsys, '--params-file', PARAMS_A, '--input', src,
+                                         '--output', tmp_path / 'm.csv')
+    header, t, values = read_motion(tmp_path / 'm.csv')
+    assert status == 0 and t.tolist() == [5.0] and values.shape == (1, 8)
+    assert '0 steps of 0.001 s, t = 5 .. 5 s' in out
+
+
+def test_progress_bar_on_a_terminal_only(tmp_path):
+    """12,000 steps: drawn on a terminal every 1,000 steps, never into a pipe."""
+    src = write_csv(tmp_path / 'long.csv', {'time': [0.0, 12.0], 'joint3.effort': [0.0, 0.0]})
+    script = Path(sys.executable).parent / 'cog_id_simulate'
+    args = [str(script), '--params-file', str(PARAMS_A), '--input', str(src), '--output',
+            'm.csv']
+    piped = subprocess.run(args, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert piped.returncode == 0 and '\r' not in piped.stderr, piped.stderr
+    master, slave = pty.openpty()
+    try:
+        proc = subprocess.Popen(args, cwd=tmp_path, stdout=subprocess.PIPE, stderr=slave)
+        os.close(slave)
+        chunks = []
+        while True:
+            try:
+                data = os.read(master, 4096)
+            except OSError:        # EIO: the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+        proc.stdout.read()
+        proc.stdout.close()
+        assert proc.wait(timeout=300) == 0
+    finally:
+        os.close(master)
+    tty = b''.join(chunks).decode()
+    assert 'simulating [' in tty and '\r' in tty
+    assert '1,000/12,000 steps' in tty and '100% 12,000/12,000 steps' in tty
