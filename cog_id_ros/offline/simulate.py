@@ -64,8 +64,8 @@ input CSV (the output of cog_id_torques; comma-separated, header row first):
                     acts from time[i] until time[i+1] (zero-order hold), the last
                     row's for one step
   <joint>.position  optional, every active joint or none: the first row's values are
-  <joint>.velocity  the initial state (the other rows must hold numbers, and are not
-                    used); without them: initial_positions, at rest
+  <joint>.velocity  the initial state (the other rows' cells are not read: empty is
+                    fine); without them: initial_positions, at rest
   Other columns are ignored with a note (an unknown joint's is an error).
 
 steps: one every --time-step from the first input time to the last (the last step
@@ -224,15 +224,15 @@ def _columns(traj, active, field):
     """``(N, M)`` of the ``field`` columns of every active joint, or None when there are none;
     ToolError naming the missing ones when only some joints have one."""
     names = [joint_column(j, field) for j in active]
-    have = [name for name in names if name in traj.columns]
+    have = [name for name in names if name in traj.first_row]
     if not have:
         return None
     if len(have) < len(names):
-        missing = [name for name in names if name not in traj.columns]
+        missing = [name for name in names if name not in traj.first_row]
         raise ToolError(f"{traj.path}: has {', '.join(have)} but not {', '.join(missing)}: "
                         f'the initial state needs the {field} of every active joint (or of '
                         'none)', EXIT_INPUT)
-    return np.column_stack([traj.columns[name] for name in names])
+    return np.array([[traj.first_row[name] for name in names]])
 
 
 def initial_state(args, mech, traj, stderr) -> tuple[list | None, list | None, str]:
@@ -273,7 +273,8 @@ def read_efforts(args, mech, stderr):
     try:
         traj = trajectory_io.read_trajectory(
             args.input, list(mech.joints) + list(mech.closure_joints), active,
-            fields=(EFFORT, 'position', 'velocity'), required=EFFORT)
+            fields=(EFFORT, 'position', 'velocity'), required=EFFORT,
+            first_row=('position', 'velocity'))
     except TrajectoryError as exc:
         hint = ''
         if exc.column and exc.column.endswith('.' + EFFORT) and exc.reason.startswith('empty'):

@@ -78,7 +78,8 @@ class Trajectory:
     """Parsed samples: ``time`` (N,) and ``columns`` {column name: (N,) float array}.
 
     Only the columns the tool uses are parsed. ``notes`` lists one human-readable line
-    per ignored column group.
+    per ignored column group. ``first_row``: {column name: value} of the columns read on
+    the first row only (see :func:`read_trajectory`).
     """
 
     def __init__(self, path, time, columns, notes, header):
@@ -87,6 +88,7 @@ class Trajectory:
         self.columns = columns
         self.notes = notes
         self.header = header
+        self.first_row = {}
 
     def __len__(self):
         return self.time.size
@@ -273,13 +275,15 @@ def _locate_bad_cell(path, lines, n_columns, order, numpy_message):
 
 
 def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequence[str],
-                    fields: Sequence[str] = FIELDS, required: str = 'position'
-                    ) -> 'Trajectory':
+                    fields: Sequence[str] = FIELDS, required: str = 'position',
+                    first_row: Sequence[str] = ()) -> 'Trajectory':
     """Read and validate a trajectory CSV for a mechanism (``joints``, ``active_joints``).
 
     ``fields``: the ``<joint>.<field>`` columns read (a trajectory's position, velocity and
     acceleration; ``cog_id_simulate`` reads an efforts file with effort, position and
-    velocity); ``required``: the field every active joint must have a column of.
+    velocity); ``required``: the field every active joint must have a column of;
+    ``first_row``: fields of ``fields`` read on the first data row only (the other rows'
+    cells are not parsed), into ``Trajectory.first_row`` {column name: float}.
 
     Raises :class:`TrajectoryError` naming the row and column of the first problem:
     a missing, duplicate or unknown column, a ragged or blank row, a cell that is not a
@@ -297,7 +301,8 @@ def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequen
     used, notes = _classify_header(path, names, joints, active_joints, fields, required)
     if len(lines) < 2:
         raise TrajectoryError(path, 'no data rows after the header', header=True)
-    order = sorted(used.items(), key=lambda kv: kv[1])
+    once = {name: i for name, i in used.items() if name.rpartition('.')[2] in first_row}
+    order = sorted(((n, i) for n, i in used.items() if n not in once), key=lambda kv: kv[1])
     if quoted:
         data = _parse_rows(path, lines, len(names), order)
     else:
@@ -321,7 +326,10 @@ def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequen
         raise TrajectoryError(
             path, f'time {float(time[k])!r} does not increase strictly (the row before has '
             f'{float(time[k - 1])!r})', row=k + 1, column=TIME)
-    return Trajectory(path, time, columns, notes, names)
+    traj = Trajectory(path, time, columns, notes, names)
+    traj.first_row = dict(zip(once, map(float, _parse_rows(
+        path, lines[:2], len(names), list(once.items()))[0])))
+    return traj
 
 
 def format_efforts(time: np.ndarray, efforts: np.ndarray, valid: np.ndarray,

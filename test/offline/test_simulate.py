@@ -126,7 +126,8 @@ BAD_INPUTS = [
     (dict(time=[0.0, 0.002, 0.001]), 'does not increase strictly'),
     (dict(**{'joint3.effort': ['1.0', '', '1.0']}),
      'cog_id_torques --skip-invalid leaves the efforts of a row it could not solve empty'),
-    (dict(**{'joint3.velocity': ['0.0', '', '']}), "column 'joint3.velocity': empty cell"),
+    (dict(**{'joint3.velocity': ['', '', '']}), "column 'joint3.velocity': empty cell"),
+    (dict(**{'joint3.position': ['1e999', '', '']}), 'beyond the range of a double'),
 ]
 
 

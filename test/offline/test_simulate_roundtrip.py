@@ -153,6 +153,11 @@ def test_the_first_rows_positions_and_velocities_are_the_initial_state(tmp_path,
                              'joint3.velocity': [0.5, 9.0, 9.0]})
     row, out = first_row(tmp_path, capsys, PARAMS_A, src)
     assert row['joint3.position'] == 1.2 and row['joint3.velocity'] == 0.5
+    # the other rows' cells are not read: empty is fine
+    src.write_text(src.read_text().replace(',9.0,9.0\n', ',,\n'))
+    assert ',,' in src.read_text()
+    row, out = first_row(tmp_path, capsys, PARAMS_A, src)
+    assert row['joint3.position'] == 1.2 and row['joint3.velocity'] == 0.5
     # the parallelogram: joint1 follows joint3, the coupler stays horizontal
     assert row['joint1.position'] == pytest.approx(1.2, abs=1e-12)
     assert row['joint1.velocity'] == pytest.approx(0.5, abs=1e-12)
