@@ -299,7 +299,7 @@ def _c_many(name, params, sizes, n_out):
             '}']
 
 
-def c_module_source(module, kernels):
+def c_module_source(module, kernels, extra='', extra_methods=()):
     """C source of a CPython extension module ``module`` with one function per kernel.
 
     kernels: list of (name, params, record type name, fields) as for :func:`python_source`.
@@ -307,19 +307,25 @@ def c_module_source(module, kernels):
     the order of ``kernels``, before a kernel is. Each kernel ``name`` also comes as
     ``name_many(*arrays, out)``: C-contiguous float64 arrays of shape (N, inputs of the
     parameter) and a writable (N, outputs) array that receives the outputs of every sample
-    in the order of ``fields``, flattened. Returns (source, {name: operations}).
+    in the order of ``fields``, flattened. ``extra``: C that follows the kernels (and may call
+    their ``body_<name>`` functions), its module functions ``extra_methods`` ((name, C
+    function, doc), METH_FASTCALL). Returns (source, {name: operations}).
     """
     parts = [c_prelude(len(kernels))]
     counts = {}
     for index, (name, params, _, fields) in enumerate(kernels):
         source, counts[name], _ = c_kernel_source(index, name, params, fields)
         parts.append(source)
+    if extra:
+        parts.append(extra)
     methods = [f'    {{"{name}{many}", (PyCFunction)(void (*)(void))kernel_{name}{many}, '
                f'METH_FASTCALL, "{text}"}},'
                for name, _, record, _ in kernels
                for many, text in (('', f'{record} of the mechanism (cog_id_ros.core.kernels)'),
                                   ('_many', f'{name} over N samples: (N, width) float64 '
                                             f'arrays in, the (N, outputs) array written'))]
+    methods += [f'    {{"{name}", (PyCFunction)(void (*)(void)){function}, METH_FASTCALL, '
+                f'"{doc}"}},' for name, function, doc in extra_methods]
     parts.append('static PyMethodDef methods[] = {\n'
                  '    {"set_record_types", set_record_types, METH_VARARGS, NULL},\n'
                  + '\n'.join(methods) + '\n    {NULL, NULL, 0, NULL}\n};\n')

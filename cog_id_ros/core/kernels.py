@@ -37,7 +37,7 @@ import weakref
 
 import numpy as np
 
-from . import closure, native
+from . import closure, native, native_simulation
 from . import spatial as sp
 from .continuation import prediction
 from .emitter import c_module_source, python_function
@@ -275,6 +275,8 @@ class NativeKernels(ReferenceKernels):
         self.prediction = module.prediction
         self.closure, self.dynamics = module.closure, module.dynamics
         self.forward = module.forward
+        #: one Simulation step in C (native_simulation.py)
+        self.rk4_step = module.rk4_step
         self.module = module
         self.widths = {name: width(layout) for name, layout in self.layouts.items()}
 
@@ -296,9 +298,12 @@ class NativeKernels(ReferenceKernels):
     def _source(self, module):
         """(C source of the module, operations per kernel): traced here, only when the
         library must be built, and not kept (a large mechanism's trace is tens of MB)."""
+        m = self.mechanism
         return c_module_source(module, [(name, params, record.__name__, fields)
-                                        for name, params, record, fields in
-                                        trace(self.mechanism)])
+                                        for name, params, record, fields in trace(m)],
+                               native_simulation.simulation_source(m, self.layouts),
+                               [(name, 'sim_' + name, doc)
+                                for name, doc in native_simulation.METHODS])
 
 
 def kernel_key(mechanism):

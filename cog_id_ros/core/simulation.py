@@ -17,7 +17,9 @@ fourth-order Runge-Kutta rule on (z, zdot):
 
 and the pose at z' is closed again, so the loops stay closed to closure_tolerance at every
 step whatever the number of steps. The accelerations of the last evaluation are kept with
-their efforts: a step with the same efforts as the last one starts from them.
+their efforts: a step with the same efforts as the last one starts from them. With compiled
+kernels the step is first tried in C (native_simulation.py: the same operations, so the
+same numbers), which leaves to this one what it does not do (continuation, errors).
 """
 from typing import List, Optional, Sequence, Tuple
 
@@ -31,11 +33,13 @@ from .errors import (
     SetpointError,
     SingularConfigurationError,
 )
+from .forward_dynamics import INERTIA_CONDITION_LIMIT
 from .forward_solve import LABELS, ForwardSolver, State
 from .inputs import setpoints
 from .joint_motion import active_velocity_map, combine
 from .kernels import ForwardRecord, kernels_for
 from .mechanism import Mechanism
+from .native_simulation import step_config
 
 #: InverseDynamics.continuation_step: the solver follows the branch in steps of this
 CONTINUATION_STEP = 0.1
@@ -67,6 +71,11 @@ class Simulation:
         self._backend = kernels.name
         self._forward = ForwardSolver(solved, kernels, CONTINUATION_STEP, mechanism.joints_at)
         self._pairs = solved.primary_pairs          # (active index, joint index) per primary
+        serial = self._forward.serial
+        #: the step in C (compiled kernels only) and its constants
+        self._native = getattr(kernels, 'rk4_step', None)
+        self._config = step_config(self.time_step, solved, INERTIA_CONDITION_LIMIT,
+                                   serial.limits, serial.bounds)
         self.reset()
 
     # --- state --------------------------------------------------------------------------
@@ -96,8 +105,7 @@ class Simulation:
     def accelerations(self) -> np.ndarray:
         """Active-joint accelerations (M,) the last efforts produce at :attr:`time` (zeros
         before the first step)."""
-        return np.array(self._last[1].accelerations) if self._last else \
-            np.zeros(len(self._rates))
+        return np.array(self._last[1])
 
     @property
     def closure_residual(self) -> float:
@@ -140,7 +148,7 @@ class Simulation:
                 record = self._forward.again(state, self._primary_to_active(state, zd), zeros)
         else:
             record = self._forward.again(state, zeros, zeros)
-        self._set(state, record, zd, zeros, 0)
+        self._set(state, record.accelerations, record.worst, zd, zeros, 0)
 
     def step(self, tau: Sequence[float]) -> None:
         """Advance :attr:`time` by one time step with the efforts ``tau`` (active joints,
@@ -154,14 +162,26 @@ class Simulation:
             raise SetpointError(f'step takes one sample of efforts (one number per active '
                                 f'joint), got shape {np.shape(tau)}')
         try:
-            self._rk4(tau)
+            if self._native is None or not self._native_step(tau):
+                self._rk4(tau)
         except CogIdError as exc:
             raise self._stopped(exc) from None
 
+    def _native_step(self, tau: List[float]) -> bool:
+        """The step in C (native_simulation.py); False where it leaves it to :meth:`_rk4`."""
+        k1 = self._primary(self._last[1]) if self._last[0] == tau else None
+        q, basis = self._state
+        out = self._native(q, basis, self._zd, tau, k1, self._config)
+        if out is None:
+            return False
+        q, basis, zd, accelerations, worst = out
+        self._set((q, basis), accelerations, worst, zd, tau, self._steps + 1)
+        return True
+
     def _rk4(self, tau: List[float]) -> None:
         h, state, z, zd = self.time_step, self._state, self._z, self._zd
-        if self._last is not None and self._last[0] == tau:
-            k1 = self._primary(self._last[1].accelerations)
+        if self._last[0] == tau:
+            k1 = self._primary(self._last[1])
         else:
             k1 = self._primary(self._forward.again(state, self._rates, tau).accelerations)
         zd2 = [v + 0.5 * h * a for v, a in zip(zd, k1)]
@@ -179,7 +199,7 @@ class Simulation:
         zd_new = [v + sixth * (a + 2.0 * b + 2.0 * c + d)
                   for v, a, b, c, d in zip(zd, k1, k2, k3, k4)]
         record, new_state = self._evaluate(state, z_new, zd_new, tau)
-        self._set(new_state, record, zd_new, tau, self._steps + 1)
+        self._set(new_state, record.accelerations, record.worst, zd_new, tau, self._steps + 1)
 
     def _evaluate(self, state: State, z: List[float], zd: List[float], tau: List[float]
                   ) -> Tuple[ForwardRecord, State]:
@@ -202,13 +222,15 @@ class Simulation:
 
     # --- helpers ------------------------------------------------------------------------
 
-    def _set(self, state: State, record: ForwardRecord, zd: List[float], tau: List[float],
-             steps: int) -> None:
+    def _set(self, state: State, accelerations: Sequence[float], residual: float,
+             zd: Sequence[float], tau: List[float], steps: int) -> None:
+        """The state after a step (or a reset): the pose, the primary rates, the time in
+        steps; the accelerations there with the efforts ``tau`` and the closure residual."""
         self._state, self._zd, self._steps = state, list(zd), steps
         self._z = [state[0][j] for _, j in self._pairs]
         self._rates = self._primary_to_active(state, self._zd)
-        self._residual = record.worst
-        self._last = (list(tau), record)
+        self._residual = residual
+        self._last = (list(tau), list(accelerations))
 
     def _primary(self, accelerations: Sequence[float]) -> List[float]:
         """The primary actuators' entries of an active-joint vector."""

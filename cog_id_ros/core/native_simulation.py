@@ -1,0 +1,81 @@
+"""The Simulation step compiled with the kernels: kernels_simulation.c, sized for a mechanism.
+
+simulation.py's RK4 step calls the kernels about fifteen times and decides in Python between
+the calls; for a small mechanism the deciding costs more than the kernels. With compiled
+kernels the module also holds ``rk4_step``, the same step in C for the case the Python step
+takes most often (every stage one continuation step away, closed by Newton, not singular),
+the same operations in the same order; otherwise it returns None and the Python step runs.
+This module writes the constants it is compiled with: the mechanism's sizes and joint
+indices, where each field sits in the kernels' flat outputs (kernels.layouts), and
+sample_solve.py's Newton constants.
+"""
+from importlib import resources
+from typing import Dict, List, Sequence, Tuple
+
+from . import sample_solve
+from .continuation import TWO_PI, wrapping_actuators
+from .mechanism import Mechanism
+
+#: the C of the step (package data beside this module)
+C_SIMULATION = 'kernels_simulation.c'
+
+#: the module function it adds: (name, doc)
+METHODS = [('rk4_step', 'one Simulation step, or None where the Python step must take it')]
+
+
+def offsets(layout: Sequence[Tuple[str, tuple]]) -> Dict[str, int]:
+    """Where each field of a kernel's flat output starts (and 'width': the whole)."""
+    out, at = {}, 0
+    for name, shape in layout:
+        out[name] = at
+        size = 1
+        for n in shape:
+            size *= n
+        at += size
+    out['width'] = at
+    return out
+
+
+def _int_array(name: str, values: Sequence[int]) -> str:
+    body = ', '.join(str(int(v)) for v in values) or '0'
+    return f'static const int {name}[{max(len(values), 1)}] = {{{body}}};'
+
+
+def simulation_source(mechanism: Mechanism, layouts: Dict[str, List[Tuple[str, tuple]]]
+                      ) -> str:
+    """The C of ``rk4_step`` for ``mechanism``'s kernels (after their bodies in a module)."""
+    m = mechanism
+    closing, forward = offsets(layouts['closure']), offsets(layouts['forward'])
+    defines = {
+        'SIM_N': m.n_coordinates, 'SIM_DOF': m.dof, 'SIM_M': len(m.active_joints),
+        'SIM_FREE': len(m.free_joints), 'SIM_REDUNDANT': int(m.is_redundant),
+        'SIM_WRAPPING': len(wrapping_actuators(m)),
+        'SIM_CLOSURE_WIDTH': closing['width'], 'SIM_FORWARD_WIDTH': forward['width'],
+        'SIM_OFF_INC': closing['increment'], 'SIM_OFF_WORST': closing['worst'],
+        'SIM_OFF_LEAST': closing['least_cosine'], 'SIM_OFF_LARGEST': closing['largest_step'],
+        'SIM_OFF_COND': forward['condition'], 'SIM_OFF_ACC': forward['accelerations'],
+        'SIM_OFF_BASIS': forward['basis'], 'SIM_OFF_INERTIA': forward['inertia_condition'],
+        'SIM_NEWTON_ITERATIONS': sample_solve.NEWTON_ITERATIONS,
+        'SIM_NEWTON_MAX_INCREMENT': repr(float(sample_solve.NEWTON_MAX_INCREMENT)),
+        'SIM_LIKELY_CLOSED': repr(float(sample_solve.LIKELY_CLOSED)),
+        'SIM_STAGNATION': repr(float(sample_solve.STAGNATION)),
+        'SIM_TWO_PI': repr(TWO_PI),
+    }
+    assert closing['worst'] == forward['worst'] and closing['increment'] == forward['increment']
+    lines = [f'#define {name} {value}' for name, value in defines.items()]
+    lines += [_int_array('sim_free', m.free_joints),
+              _int_array('sim_active', m.active_index),
+              _int_array('sim_primary_active', m.primary),
+              _int_array('sim_primary_joint', m.primary_joints),
+              _int_array('sim_wrapping', wrapping_actuators(m))]
+    text = resources.files(__package__).joinpath(C_SIMULATION).read_text(encoding='ascii')
+    return '\n'.join(lines) + '\n\n' + text
+
+
+def step_config(time_step: float, mechanism: Mechanism, inertia_limit: float,
+                limits: Sequence[float], bounds: Sequence[float]) -> List[float]:
+    """The ``cfg`` argument of rk4_step: [h, closure tolerance, max condition number,
+    inertia limit, joint step limits (n), Newton correction bounds (n)]."""
+    m = mechanism
+    return [float(time_step), float(m.closure_tolerance), float(m.max_condition_number),
+            float(inertia_limit)] + [float(x) for x in limits] + [float(x) for x in bounds]
