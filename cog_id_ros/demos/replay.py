@@ -27,6 +27,7 @@ import math
 import os
 import subprocess
 import sys
+from typing import Sequence
 
 import numpy as np
 
@@ -54,7 +55,7 @@ FAILED = 1
 NOT_FOUND = 2
 
 
-def torque_derivatives(t):
+def torque_derivatives(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """|tau'| and |tau''| of the exact torque tau(t) = I theta'' + 2 M G L cos(theta) along the
     target motion theta = pi/2 + 0.5 sin(pi t), analytically."""
     w = math.pi
@@ -66,7 +67,7 @@ def torque_derivatives(t):
     return np.abs(d1), np.abs(d2)
 
 
-def error_bound(h, duration=DURATION):
+def error_bound(h: float, duration: float = DURATION) -> float:
     """The largest crank-angle error (rad) a replay with ``--between-rows linear`` and steps of
     ``h`` s can make over ``duration``, from the step size alone.
 
@@ -87,13 +88,13 @@ def error_bound(h, duration=DURATION):
                                       + d1 * math.sinh(grown) / GROWTH)
 
 
-def tool(name):
+def tool(name: str) -> list[str]:
     """The command of a console tool (its module, with this interpreter)."""
     module = {'cog_id_torques': 'cli', 'cog_id_simulate': 'simulate'}[name]
     return [sys.executable, '-m', f'cog_id_ros.offline.{module}']
 
 
-def run_tool(name, args):
+def run_tool(name: str, args: list[str]) -> int:
     """Run a tool; print its command (as a user types it) and its output; its exit status."""
     shown = [os.path.relpath(a) if os.path.isabs(a) else a for a in args]
     print('$ ' + ' '.join([name] + shown), flush=True)
@@ -104,7 +105,7 @@ def run_tool(name, args):
     return proc.returncode
 
 
-def target_file(configs, out, h):
+def target_file(configs: str, out: str, h: float) -> str:
     """The target motion sampled every ``h`` s: config/paper_four_bar_target.csv for 1 ms,
     else written to ``out`` (the bound assumes torque rows one step apart)."""
     if h == 0.001:
@@ -114,7 +115,8 @@ def target_file(configs, out, h):
     return path
 
 
-def replay(case, target, configs, out, h, between='linear', plot=True):
+def replay(case: str, target: str, configs: str, out: str, h: float, between: str = 'linear',
+           plot: bool = True) -> str | None:
     """Run the two tools for ``case``; the replayed motion's CSV, or None when one failed."""
     params = os.path.join(configs, f'paper_four_bar_{case}.yaml')
     torques = os.path.join(out, f'replay_{case}_torques.csv')
@@ -130,13 +132,13 @@ def replay(case, target, configs, out, h, between='linear', plot=True):
     return None if run_tool('cog_id_simulate', args) else motion
 
 
-def crank_angle(motion, joint='joint3'):
+def crank_angle(motion: str, joint: str = 'joint3') -> tuple[np.ndarray, np.ndarray]:
     """(time, the crank angle) of a motion CSV."""
     header, t, values = trajectory_io.read_efforts(motion)
     return t, values[:, header.index(f'{joint}.position') - 1]
 
 
-def draw(path, linear, held, h):
+def draw(path: str, linear: str, held: str | None, h: float) -> None:
     """The picture: the target, the replays (``linear``, ``held``: motion CSVs of (a), held
     may be None) and their errors against the bound, on a log scale."""
     from matplotlib.figure import Figure
@@ -167,7 +169,7 @@ def draw(path, linear, held, h):
     fig.savefig(path, dpi=100)
 
 
-def angle_errors(motion, joints):
+def angle_errors(motion: str, joints: Sequence[str]) -> list[tuple[float, float]]:
     """(max |replayed - target|, its time) per joint of a motion CSV."""
     header, t, values = trajectory_io.read_efforts(motion)
     exact = target_motion(t)[0]

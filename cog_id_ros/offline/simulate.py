@@ -18,10 +18,12 @@ import math
 import os
 import sys
 import time as _time
+from typing import TYPE_CHECKING, Sequence, TextIO
 
 import numpy as np
 
 from ..core.kernels import BACKENDS
+from ..core.mechanism import Mechanism
 from . import atomic_files, outputs, samples, trajectory_io
 from .console import (
     EXIT_BROKEN_PIPE,
@@ -41,7 +43,10 @@ from .console import (
 )
 from .progress import PROGRESS_MIN_SAMPLES, ProgressBar
 from .stop_signals import Interrupted, StopSignals
-from .trajectory_io import EFFORT, TIME, TrajectoryError, joint_column
+from .trajectory_io import EFFORT, TIME, Trajectory, TrajectoryError, joint_column
+
+if TYPE_CHECKING:
+    from ..core.simulation import Simulation
 
 PROG = 'cog_id_simulate'
 TRACEBACK_ENV = 'COG_ID_SIMULATE_TRACEBACK'
@@ -220,7 +225,7 @@ def step_efforts(time: np.ndarray, efforts: np.ndarray, h: float, n_steps: int,
     return held, int(spans.size)
 
 
-def _columns(traj, active, field):
+def _columns(traj: Trajectory, active: Sequence[str], field: str) -> np.ndarray | None:
     """``(N, M)`` of the ``field`` columns of every active joint, or None when there are none;
     ToolError naming the missing ones when only some joints have one."""
     names = [joint_column(j, field) for j in active]
@@ -235,7 +240,8 @@ def _columns(traj, active, field):
     return np.array([[traj.first_row[name] for name in names]])
 
 
-def initial_state(args, mech, traj, stderr) -> tuple[list | None, list | None, str]:
+def initial_state(args: argparse.Namespace, mech: Mechanism, traj: Trajectory, stderr: TextIO
+                  ) -> tuple[list | None, list | None, str]:
     """(active positions or None, active velocities or None, where they come from)."""
     active = list(mech.active_joints)
     if args.initial_state:
@@ -267,7 +273,8 @@ def initial_state(args, mech, traj, stderr) -> tuple[list | None, list | None, s
             f'{where} of row 1 of {os.path.basename(args.input)}{rest}')
 
 
-def read_efforts(args, mech, stderr):
+def read_efforts(args: argparse.Namespace, mech: Mechanism, stderr: TextIO
+                 ) -> tuple[Trajectory, np.ndarray]:
     """The efforts file: (Trajectory, efforts (N, M)); ToolError naming a bad row/column."""
     active = list(mech.active_joints)
     try:
@@ -289,7 +296,8 @@ def read_efforts(args, mech, stderr):
     return traj, np.column_stack([traj.columns[joint_column(j, EFFORT)] for j in active])
 
 
-def read_reference(args, mech, time):
+def read_reference(args: argparse.Namespace, mech: Mechanism, time: np.ndarray
+                   ) -> np.ndarray | None:
     """The --reference positions of the active joints at the step times ``time``
     (linear interpolation; NaN outside the reference's time span), or None."""
     if not args.reference:
@@ -316,7 +324,7 @@ def read_reference(args, mech, time):
     return values
 
 
-def _check_steps(args, time):
+def _check_steps(args: argparse.Namespace, time: np.ndarray) -> int:
     """The number of steps; ToolError when the run cannot be made with this --time-step."""
     h = args.time_step
     n_steps = step_count(time, h)
@@ -332,7 +340,7 @@ def _check_steps(args, time):
     return n_steps
 
 
-def _check_inputs(args):
+def _check_inputs(args: argparse.Namespace) -> None:
     for option in ('initial_state', 'reference'):
         path = getattr(args, option)
         name = '--' + option.replace('_', '-')
@@ -344,7 +352,7 @@ def _check_inputs(args):
             raise ToolError(f'--output {args.output}: is the {name} file', EXIT_USAGE)
 
 
-def _simulation(args, mech):
+def _simulation(args: argparse.Namespace, mech: Mechanism) -> 'Simulation':
     import cog_id_ros
     try:
         return cog_id_ros.Simulation(mech, time_step=args.time_step, backend=args.backend)
@@ -353,7 +361,7 @@ def _simulation(args, mech):
                         EXIT_PARAMS) from None
 
 
-def _reset(sim, q0, qd0, source):
+def _reset(sim: 'Simulation', q0: list | None, qd0: list | None, source: str) -> None:
     import cog_id_ros
     try:
         sim.reset(q0, qd0)
@@ -362,7 +370,7 @@ def _reset(sim, q0, qd0, source):
                         EXIT_INPUT) from None
 
 
-def _state(sim) -> list[float]:
+def _state(sim: 'Simulation') -> list[float]:
     """Positions and velocities of every joint, interleaved per joint (the output's order)."""
     out = []
     for q, qd in zip(sim.joint_positions(), sim.joint_velocities()):
@@ -370,12 +378,14 @@ def _state(sim) -> list[float]:
     return out
 
 
-def _write_block(f, block):
+def _write_block(f: TextIO, block: np.ndarray) -> None:
     cols = [list(map(repr, block[:, c].tolist())) for c in range(block.shape[1])]
     f.write('\n'.join(map(','.join, zip(*cols))) + '\n')
 
 
-def integrate(args, sim, mech, traj, held, f, progress, keep_active):
+def integrate(args: argparse.Namespace, sim: 'Simulation', mech: Mechanism, traj: Trajectory,
+              held: np.ndarray, f: TextIO, progress: ProgressBar, keep_active: bool
+              ) -> tuple[np.ndarray, np.ndarray | None, float]:
     """Step the simulation through ``held`` efforts, writing the motion to ``f``; returns the
     step times and (with ``keep_active``) the active joints' positions ``(n_steps + 1, M)``."""
     import cog_id_ros
@@ -414,7 +424,7 @@ def integrate(args, sim, mech, traj, held, f, progress, keep_active):
     return time, kept, residual
 
 
-def _note_holds(args, spanning, n_steps, stderr):
+def _note_holds(args: argparse.Namespace, spanning: int, n_steps: int, stderr: TextIO) -> None:
     if spanning:
         print(f'{PROG}: note: {spanning:,} of {n_steps:,} steps span a change of effort (the '
               f'input times are off the grid of --time-step {args.time_step!r} s, or closer '
@@ -422,7 +432,8 @@ def _note_holds(args, spanning, n_steps, stderr):
               file=stderr)
 
 
-def run(args, stdout, stderr, signals=None):
+def run(args: argparse.Namespace, stdout: TextIO | None, stderr: TextIO,
+        signals: StopSignals | None = None) -> int:
     """The tool's run, step by step: returns EXIT_OK, or raises ToolError (one line, an exit
     status) or Interrupted."""
     signals = signals if signals is not None else StopSignals()
@@ -476,7 +487,8 @@ def run(args, stdout, stderr, signals=None):
     return EXIT_OK
 
 
-def _plot(args, mech, path, fmt, time, active_q, reference, source):
+def _plot(args: argparse.Namespace, mech: Mechanism, path: str, fmt: str, time: np.ndarray,
+          active_q: np.ndarray, reference: np.ndarray | None, source: str) -> None:
     from . import plotting
     try:
         plotting.plot_motion(path, time, active_q, list(mech.active_joints),
@@ -492,7 +504,8 @@ def _plot(args, mech, path, fmt, time, active_q, reference, source):
                         f'{one_line(exc)[:200]}', EXIT_WRITE) from None
 
 
-def differences(active_q, reference, time):
+def differences(active_q: np.ndarray, reference: np.ndarray, time: np.ndarray
+                ) -> list[tuple[float, float] | None]:
     """Per active joint: (largest |simulated - reference|, its time), or None where the
     reference covers no step."""
     out = []
@@ -508,7 +521,9 @@ def differences(active_q, reference, time):
     return out
 
 
-def _print_summary(args, mech, stdout, time, active_q, reference, state, elapsed):
+def _print_summary(args: argparse.Namespace, mech: Mechanism, stdout: TextIO | None,
+                   time: np.ndarray, active_q: np.ndarray, reference: np.ndarray | None,
+                   state: tuple[str, float], elapsed: tuple[float, float]) -> None:
     n_steps = time.size - 1
     source, residual = state
     elapsed, integrating = elapsed
