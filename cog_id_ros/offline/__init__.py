@@ -19,8 +19,10 @@ cog_id_inspect:
   mechanism_plot.py    the mechanism drawn at a pose (and snapshots along a trajectory)
 
 cog_id_simulate:
-  simulate.py        the tool: efforts CSV in (the hold between rows, the initial state),
-                     cog_id_ros.Simulation stepped, the motion CSV, plot and summary out
+  simulate.py        the tool: its options and its run (cog_id_ros.Simulation stepped, the
+                     motion CSV, plot and summary out)
+  simulate_inputs.py the efforts CSV read, the effort each step holds (hold or line between
+                     rows), the initial state, the reference motion
 
 shared (the tools, and some with the node):
   console.py         exit statuses, one-line errors, the parser, loading, main's frame

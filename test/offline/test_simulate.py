@@ -13,7 +13,7 @@ import sys
 import numpy as np
 import pytest
 
-from cog_id_ros.offline import simulate
+from cog_id_ros.offline import simulate, simulate_inputs
 from cog_id_ros.offline import trajectory_io as tio
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,7 +56,7 @@ def error_line(err):
 def test_each_row_holds_its_effort_until_the_next_row_bit_for_bit():
     t = np.array([0.0, 0.003, 0.004])
     efforts = np.array([[1.0, -1.0], [2.0, -2.0], [3.0, -3.0]])
-    held, spanning = simulate.step_efforts(t, efforts, 0.001, simulate.step_count(t, 0.001))
+    held, spanning = simulate_inputs.step_efforts(t, efforts, 0.001, simulate_inputs.step_count(t, 0.001))
     np.testing.assert_array_equal(held, [[1.0, -1.0]] * 3 + [[2.0, -2.0]])
     assert spanning == 0
 
@@ -66,21 +66,21 @@ def test_times_written_as_decimals_are_on_the_step_grid():
     every step holds exactly its row's effort."""
     t = np.array([round(0.001 * k, 12) for k in range(1001)])
     efforts = np.arange(1001.0)[:, None]
-    n = simulate.step_count(t, 0.001)
+    n = simulate_inputs.step_count(t, 0.001)
     assert n == 1000
-    held, spanning = simulate.step_efforts(t, efforts, 0.001, n)
+    held, spanning = simulate_inputs.step_efforts(t, efforts, 0.001, n)
     np.testing.assert_array_equal(held[:, 0], np.arange(1000.0))
     assert spanning == 0
 
 
 def test_a_step_that_spans_a_change_holds_the_time_average():
     t = np.array([0.0, 0.0015, 0.003])
-    held, spanning = simulate.step_efforts(t, np.array([[1.0], [3.0], [5.0]]), 0.001, 3)
+    held, spanning = simulate_inputs.step_efforts(t, np.array([[1.0], [3.0], [5.0]]), 0.001, 3)
     np.testing.assert_allclose(held[:, 0], [1.0, 2.0, 3.0], rtol=1e-12)
     assert spanning == 1
     # rows closer than a step: the step holds their mean (the same impulse)
     fine = np.arange(9) * 0.00025
-    held, spanning = simulate.step_efforts(fine, np.arange(9.0)[:, None], 0.001, 2)
+    held, spanning = simulate_inputs.step_efforts(fine, np.arange(9.0)[:, None], 0.001, 2)
     np.testing.assert_allclose(held[:, 0], [1.5, 5.5], rtol=1e-12)
     assert spanning == 2
 
@@ -90,11 +90,11 @@ def test_linear_holds_the_mean_of_the_line_between_samples():
     (and across rows) the exact mean of the piecewise-linear effort over the step."""
     t = np.array([0.0, 0.001, 0.002, 0.003])
     e = np.array([[0.0], [2.0], [6.0], [6.0]])
-    held, spanning = simulate.step_efforts(t, e, 0.001, 3, linear=True)
+    held, spanning = simulate_inputs.step_efforts(t, e, 0.001, 3, linear=True)
     np.testing.assert_allclose(held[:, 0], [1.0, 4.0, 6.0], rtol=1e-12)
     assert spanning == 0
     # a step of 1.5 ms over rows 1 ms apart: the mean of the line, by quadrature
-    held, spanning = simulate.step_efforts(t, e, 0.0015, 2, linear=True)
+    held, spanning = simulate_inputs.step_efforts(t, e, 0.0015, 2, linear=True)
     fine = np.linspace(0.0, 0.003, 300001)
     line = np.interp(fine, t, e[:, 0])
     expect = [line[fine <= 0.0015].mean(), line[fine >= 0.0015].mean()]
@@ -103,9 +103,9 @@ def test_linear_holds_the_mean_of_the_line_between_samples():
 
 
 def test_steps_end_at_or_before_the_last_input_time():
-    assert simulate.step_count(np.array([0.0, 0.0025]), 0.001) == 2
-    assert simulate.step_count(np.array([5.0]), 0.001) == 0
-    assert simulate.step_count(np.array([0.1, 0.4]), 0.1) == 3     # 0.3 / 0.1 = 2.9999...
+    assert simulate_inputs.step_count(np.array([0.0, 0.0025]), 0.001) == 2
+    assert simulate_inputs.step_count(np.array([5.0]), 0.001) == 0
+    assert simulate_inputs.step_count(np.array([0.1, 0.4]), 0.1) == 3     # 0.3 / 0.1 = 2.9999...
 
 
 # --- errors that name what to fix -----------------------------------------------------------
