@@ -7,6 +7,8 @@ subprocess where a user's view does (a signal, the console script).
 import os
 from pathlib import Path
 import pty
+import resource
+import signal
 import subprocess
 import sys
 
@@ -289,3 +291,30 @@ def test_progress_bar_on_a_terminal_only(tmp_path):
     tty = b''.join(chunks).decode()
     assert 'simulating [' in tty and '\r' in tty
     assert '1,000/12,000 steps' in tty and '100% 12,000/12,000 steps' in tty
+
+
+def _limit_file_size(limit):
+    def apply():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)     # EFBIG instead of a kill
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return apply
+
+
+@pytest.mark.parametrize('option, path, limit', [('--output', 'm.csv', 100),
+                                                 ('--plot', 'm.png', 8000)])
+def test_a_write_error_names_the_users_path(tmp_path, option, path, limit):
+    """Exit 4, the option and the path as given (never the temporary file), nothing left.
+    (Files are limited to ``limit`` bytes: 21 rows of motion take ~4,000, the plot more.)"""
+    (tmp_path / 'in').mkdir()
+    (tmp_path / 'out').mkdir()
+    src = write_csv(tmp_path / 'in' / 'e.csv', {'time': np.arange(21) * 0.001,
+                                                'joint3.effort': np.zeros(21)})
+    script = Path(sys.executable).parent / 'cog_id_simulate'
+    proc = subprocess.run([str(script), '--params-file', str(PARAMS_A), '--input', str(src),
+                           '--output', 'm.csv', '--plot', 'm.png'], cwd=tmp_path / 'out',
+                          text=True, capture_output=True, timeout=300,
+                          preexec_fn=_limit_file_size(limit))
+    assert proc.returncode == 4, proc.stderr
+    line = error_line(proc.stderr)
+    assert f'{option} {path}: cannot write: File too large' in line and '.tmp' not in line
+    assert os.listdir(tmp_path / 'out') == []
