@@ -11,7 +11,8 @@ REASONS = {
     'out_of_range': 'a finite value too large to compute with (the torques would overflow)',
     'limit': "an active joint's position outside its limits (joints.<name>.lower / upper)",
     'closure': 'the loops cannot be closed at this pose',
-    'singular': 'the pose is singular (closure Jacobian condition number too large)',
+    'singular': 'the pose is singular (closure Jacobian condition number too large; for '
+                'forward dynamics also an inertia that cannot be solved)',
     'inconsistent': 'redundant actuation: the active coordinates disagree with the loop closure',
     'unreachable': 'the pose cannot be reached from the previous one by continuation',
 }
@@ -70,7 +71,8 @@ class ClosureError(CogIdError):
 
 
 class SingularConfigurationError(CogIdError):
-    """The closure Jacobian is (nearly) singular here: ``condition_number`` says how badly."""
+    """The closure Jacobian is (nearly) singular here, or for forward dynamics the inertia
+    (forward_dynamics.py): ``condition_number`` says how badly."""
 
     reason = 'singular'
 

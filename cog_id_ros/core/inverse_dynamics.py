@@ -95,18 +95,19 @@ class InverseDynamics:
         redundant mechanism moves by the generalized force of its efforts alone.
         SingularConfigurationError also for an inertia that cannot be solved.
         """
-        q, qd, tau, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, tau,
-                                       labels=LABELS)
+        positions, rates_in, efforts, single = setpoints(
+            self.mechanism, self._serial.wrapping, q, qd, tau, labels=LABELS)
         if single:
-            record, self._state = self._forward.one(self._state, q, qd, tau)
+            record, self._state = self._forward.one(self._state, positions, rates_in, efforts)
             return np.array(record.accelerations)
-        if len(q) == 0:
-            return np.zeros(q.shape)
-        if len(q) == 1:
-            record, self._state = self._forward.one(self._state, *(x[0].tolist()
-                                                                 for x in (q, qd, tau)))
+        if len(positions) == 0:
+            return np.zeros(np.shape(positions))
+        if len(positions) == 1:
+            record, self._state = self._forward.one(
+                self._state, *(x[0].tolist() for x in (positions, rates_in, efforts)))
             return np.array([record.accelerations])
-        accelerations, self._state = self._forward.many(self._state, q, qd, tau)
+        accelerations, self._state = self._forward.many(self._state, positions, rates_in,
+                                                        efforts)
         return accelerations
 
     def sample_torques(self, q: Sequence[float], qd: Optional[Sequence[float]] = None,

@@ -1,6 +1,6 @@
 """Compiled kernels: the traced kernels as C, built by the system's C compiler, cached on disk.
 
-``backend='native'`` (and ``'auto'`` where it can) writes the mechanism's three kernels as a
+``backend='native'`` (and ``'auto'`` where it can) writes the mechanism's kernels as a
 CPython extension module (emitter.c_module_source), compiles it once and keeps the library
 in a cache directory keyed by a hash of what it is made of (the mechanism's model as read and
 the core's source, kernels.kernel_key), the Python version, the flags and ``$CC`` if set.
@@ -90,7 +90,7 @@ __all__ = ['BUILD_TIMEOUT', 'FLAGS', 'FUTURE_SLACK', 'PROCESS', 'QUICK_ABOVE', '
 FLAGS = ['-shared', '-fPIC', '-ffp-contract=off', '-fno-fast-math',
          '-fno-unsafe-math-optimizations']
 
-#: operations (the three kernels') above which the first build is -O0, -O2 following in background
+#: operations (all the kernels') above which the first build is -O0, -O2 following in background
 QUICK_ABOVE = 6000
 
 #: seconds a build may take before it counts as failed (the compiler is then stopped); read

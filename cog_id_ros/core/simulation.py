@@ -21,7 +21,7 @@ their efforts: a step with the same efforts as the last one starts from them. Wi
 kernels the step is first tried in C (native_simulation.py: the same operations, so the
 same numbers), which leaves to this one what it does not do (continuation, errors).
 """
-from typing import List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -73,7 +73,7 @@ class Simulation:
         self._pairs = solved.primary_pairs          # (active index, joint index) per primary
         serial = self._forward.serial
         #: the step in C (compiled kernels only) and its constants
-        self._native = getattr(kernels, 'rk4_step', None)
+        self._native: Optional[Callable[..., Any]] = getattr(kernels, 'rk4_step', None)
         self._config = step_config(self.time_step, solved, INERTIA_CONDITION_LIMIT,
                                    serial.limits, serial.bounds)
         self.reset()
@@ -150,25 +150,30 @@ class Simulation:
             record = self._forward.again(state, zeros, zeros)
         self._set(state, record.accelerations, record.worst, zd, zeros, 0)
 
-    def step(self, tau: Sequence[float]) -> None:
+    def step(self, tau: Union[Sequence[float], np.ndarray]) -> None:
         """Advance :attr:`time` by one time step with the efforts ``tau`` (active joints,
         N m or N) held over it. A singular or unreachable pose on the way raises (the
         state stays at the last step: :meth:`reset` to go on), the error naming the time
         and the joints; so do efforts that are not one finite number per active joint."""
         m = self._solved
         zeros = [0.0] * len(m.active_joints)
-        _, _, tau, single = setpoints(m, (), zeros, zeros, tau, limits=False, labels=LABELS)
+        _, _, checked, single = setpoints(m, (), zeros, zeros, tau, limits=False,
+                                          labels=LABELS)
         if not single:
             raise SetpointError(f'step takes one sample of efforts (one number per active '
-                                f'joint), got shape {np.shape(tau)}')
+                                f'joint), got shape {np.shape(checked)}')
+        efforts = list(checked)
         try:
-            if self._native is None or not self._native_step(tau):
-                self._rk4(tau)
+            if not self._native_step(efforts):
+                self._rk4(efforts)
         except CogIdError as exc:
             raise self._stopped(exc) from None
 
     def _native_step(self, tau: List[float]) -> bool:
-        """The step in C (native_simulation.py); False where it leaves it to :meth:`_rk4`."""
+        """The step in C (native_simulation.py); False where it leaves it to :meth:`_rk4`
+        (or there are no compiled kernels)."""
+        if self._native is None:
+            return False
         k1 = self._primary(self._last[1]) if self._last[0] == tau else None
         q, basis = self._state
         out = self._native(q, basis, self._zd, tau, k1, self._config)

@@ -21,7 +21,7 @@ import pytest
 
 pytest.importorskip('rclpy')
 
-from conftest import DOMAIN_ID, REPO  # noqa: E402
+from conftest import DOMAIN_ID, REPO, wait_until  # noqa: E402
 
 from cog_id_ros.demos import fig4  # noqa: E402
 
@@ -158,6 +158,15 @@ def test_fig4_says_when_another_run_mixed_into_its_recording(other_node, tmp_pat
     monkeypatch.setattr(fig4, 'look_around', lambda seconds: [])
     monkeypatch.setattr(fig4, 'others_in_domain', lambda graph, running: [])
     monkeypatch.setattr(fig4, 'same_name_nodes', lambda procs: [])
+    connect = fig4.connect
+
+    def connect_both(player, recorder, namespace):
+        # the other node must have matched the player before it plays: discovery on a
+        # loaded machine can take longer than the run, and then nothing mixes at all
+        connect(player, recorder, namespace)
+        if namespace == '/fig4_a':
+            assert wait_until(lambda: player.publisher.get_subscription_count() >= 2, 30)
+    monkeypatch.setattr(fig4, 'connect', connect_both)
     assert fig4.main(['--output', str(tmp_path / 'fig4.png')]) == 2
     out = capsys.readouterr()
     match = refusal_of(out.err)

@@ -133,7 +133,10 @@ def test_a_killed_solve_then_a_rejected_setpoint_leaves_the_stream_served(ros_pr
     """Reliability 2, item 1: the trajectory process killed while it solved (an internal
     error) followed by one rejected setpoint killed the setpoint thread: 0 of the next 200
     valid setpoints were answered, and the event was counted twice in internal_errors."""
-    proc = start(ros_process, '/killsolve', '-p', 'setpoint_timeout:=0.0')
+    # the subscription holds the whole stream: on a loaded machine a default queue loses
+    # some (counted, but then not answered), which is not what this test is about
+    proc = start(ros_process, '/killsolve', '-p', 'setpoint_timeout:=0.0',
+                 '-p', 'qos_overrides./killsolve/joint_setpoint.subscription.depth:=400')
     probe = probe_for('/killsolve')
     probe.trajectories.publish(long_trajectory(40_000))
     assert wait_values(probe, lambda kv: kv['trajectory_in_progress'] == 'true'), proc.output
@@ -574,14 +577,18 @@ def test_a_stop_signal_while_the_node_imports_exits_0(ros_env):
     0 until the node's own handling takes over. Signals at 0.05, 0.2 and 0.5 s after exec;
     none before the interpreter itself can run a line of the program (its site module and
     the venv's .pth files, ~25 ms on an idle machine, more under load, are out of any
-    program's reach): that floor is measured, and a delay below it raised to 1.5 times it."""
+    program's reach): that floor is measured (the slowest of three runs), and a delay below
+    it raised to twice it."""
     from conftest import BIN, REPO
     script = os.path.join(BIN, 'cog_id_node')
     for delay in (0.05, 0.2, 0.5):
         for sig in (signal.SIGINT, signal.SIGTERM):
-            began = time.monotonic()
-            subprocess.run([sys.executable, '-c', 'pass'], env=ros_env, check=True)
-            wait = max(delay, 1.5 * (time.monotonic() - began))
+            floor = 0.0
+            for _ in range(3):          # the slowest of three: the load changes from run to run
+                began = time.monotonic()
+                subprocess.run([sys.executable, '-c', 'pass'], env=ros_env, check=True)
+                floor = max(floor, time.monotonic() - began)
+            wait = max(delay, 2.0 * floor)
             proc = subprocess.Popen([script, '--ros-args', '--params-file', CONFIG_A,
                                      '-r', '__ns:=/early'], env=ros_env, cwd=REPO,
                                     stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
