@@ -97,13 +97,18 @@ def main(argv=None):
     args = parser.parse_args(argv)
     differences = 0
     count = 0
+    new = []
     for key, values in every_record():
         file = os.path.join(args.save or args.compare, key.replace(':', '__') + '.npz')
-        count += 1
         if args.save:
+            count += 1
             os.makedirs(args.save, exist_ok=True)
             np.savez(file, **values)
             continue
+        if not os.path.exists(file):        # an example added since the save: nothing to
+            new.append(key)                 # compare it with
+            continue
+        count += 1
         with np.load(file) as before:
             for field, now in values.items():
                 then = before[field]
@@ -114,7 +119,8 @@ def main(argv=None):
                              else f'shape {then.shape} -> {now.shape}')
                     print(f'DIFFERENT {key} {field}: largest difference {worst}')
     verb = 'saved' if args.save else 'compared'
-    print(f'{count} records {verb}' + ('' if args.save else f', {differences} different'))
+    print(f'{count} records {verb}' + ('' if args.save else f', {differences} different')
+          + (f"; {len(new)} new, not saved before: {', '.join(new)}" if new else ''))
     return 1 if differences else 0
 
 

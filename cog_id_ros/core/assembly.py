@@ -1,19 +1,22 @@
 """Assembly at load: the mechanism's loops closed near ``initial_positions``, what closing
 them moved, and which loops to check when they do not close.
 
-The loops are closed with the actuators held at their initial positions (Gauss-Newton on
-the closure equations, closure.assemble); failing that (e.g. rounded redundant initial
-positions), with every joint free, but a move of an actuator by more than
+The loops are closed with the actuators (and the locked joints, idle_spins.py) held at
+their initial positions (Gauss-Newton on the closure equations, closure.assemble); failing
+that (e.g. rounded redundant initial positions), with every joint but the locked ones
+free, but a move of an actuator by more than
 setpoint_tolerance is refused. What the assembly had to change is reported in
 ``Mechanism.assembly_warnings`` and as AssemblyWarning.
 """
 import math
+from typing import Any, Iterable, Sequence
 import warnings
 
 from . import closure, spherical_chains
 from . import kinematics as kin
 from . import spatial as sp
 from .errors import MechanismConfigError
+from .value_types import MechanismLike
 
 #: assembly that moves a passive joint further than this from initial_positions is reported
 #: (rad for an angle; for a length this fraction of the mechanism's scale)
@@ -26,7 +29,7 @@ class AssemblyWarning(UserWarning):
     loaded, but its geometry or initial positions are probably not what was meant."""
 
 
-def assemble(mech):
+def assemble(mech: MechanismLike) -> tuple[list[float], str | None, MechanismConfigError | None]:
     """(q, moved, problem): every coordinate at the assembled pose; when closing the loops
     moved actuators by more than setpoint_tolerance, which (text) and the
     MechanismConfigError to raise (after the degrees of freedom are counted: a rigid
@@ -35,10 +38,11 @@ def assemble(mech):
     start = spherical_chains.with_chain_starts(
         mech, mech.model.start(mech.initial_positions))
     q, residual, ok = closure.assemble(mech.model, start, mech.closure_tolerance,
-                                       fixed=mech.active_index)
+                                       fixed=mech.active_index + mech.locked_index)
     if not ok:
         held_q, held_residual = q, residual
-        q, residual, ok = closure.assemble(mech.model, start, mech.closure_tolerance)
+        q, residual, ok = closure.assemble(mech.model, start, mech.closure_tolerance,
+                                           fixed=mech.locked_index)
         if not ok:
             raise MechanismConfigError(
                 'mechanism.initial_positions',
@@ -67,7 +71,7 @@ def assemble(mech):
     return q, None, None
 
 
-def far_move_limit(mech, j):
+def far_move_limit(mech: MechanismLike, j: int) -> tuple[float, str | None]:
     """(limit, unit): a move of joint j at assembly beyond this is reported as far
     (FAR_ANGLE rad; for a joint whose coordinate is a length, FAR_FRACTION of the
     mechanism's scale, its largest attachment offset)."""
@@ -77,17 +81,18 @@ def far_move_limit(mech, j):
     return FAR_FRACTION * mech.attachment_scale, unit
 
 
-def attachment_scale(specs):
+def attachment_scale(specs: Sequence[kin.JointSpec]) -> float:
     """The largest attachment offset of the joints ``specs`` (m; 1.0 if there is none)."""
     scale = max([math.hypot(*spec.parent_xyz) for spec in specs]
                 + [math.hypot(*spec.child_xyz) for spec in specs] + [0.0])
     return scale if scale > 0.0 else 1.0
 
 
-def _report_far_moves(mech, start, q):
+def _report_far_moves(mech: MechanismLike, start: Sequence[float], q: Sequence[float]) -> None:
     """A note for every passive joint the assembly moved far from initial_positions."""
-    held = set(mech.active_index)
-    far, moved = [], []
+    held = set(mech.active_index) | set(mech.locked_index)
+    far: list[str] = []
+    moved: list[int] = []
     for j, (a, b) in enumerate(zip(start[:len(mech.joints)], q)):
         if j in held:
             continue
@@ -105,16 +110,17 @@ def _report_far_moves(mech, start, q):
              f'{check_loops_hint(mech, None, moved)}')
 
 
-def note(mech, text):
+def note(mech: MechanismLike, text: str) -> None:
     """Report ``text`` in mech.assembly_warnings and as an AssemblyWarning."""
     mech.assembly_warnings.append(text)
     warnings.warn(f'{mech.name}: {text}', AssemblyWarning, stacklevel=4)
 
 
-def _loops_of(mech, q=None):
+def _loops_of(mech: MechanismLike,
+              q: Iterable[float] | None = None) -> list[tuple[str, list[str], float | None]]:
     """(loop-closing joint, joints of its loop, residual at q or None) of every loop."""
     model = mech.model
-    residuals = [None] * len(model.loops)
+    residuals: list[Any] = [None] * len(model.loops)
     if q is not None:
         frames = kin.forward_kinematics(model, list(q), sp.ScalarOps)
         states = closure.loop_closure(model, frames, list(q), sp.ScalarOps)
@@ -127,7 +133,8 @@ def _loops_of(mech, q=None):
     return out
 
 
-def check_loops_hint(mech, q, joints=None):
+def check_loops_hint(mech: MechanismLike, q: Iterable[float] | None,
+                     joints: Iterable[int] | None = None) -> str:
     """What to check: the joints of the loops that stay open at q, or else of the loops
     through any of ``joints`` (indices), or else of all loops."""
     loops = _loops_of(mech, q)

@@ -16,6 +16,7 @@ reaches, at a fraction of its cost:
 """
 import heapq
 import math
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
@@ -31,7 +32,14 @@ from .sample_solve import (
     NEWTON_MAX_INCREMENT,
     PROJECTION_ITERATIONS,
     PROJECTION_TOLERANCE,
+    SampleSolver,
 )
+from .value_types import BoolArray, FloatArray, IntArray
+
+if TYPE_CHECKING:
+    from .continuation import State
+    from .joint_motion import BasisLayout
+    from .mechanism import Mechanism
 
 
 class Evaluation:
@@ -48,7 +56,9 @@ class Evaluation:
     condition_number (N,): closure Jacobian condition number (see mechanism.max_condition_number)
     """
 
-    def __init__(self, torques, valid, errors, positions, active_positions, residual, condition):
+    def __init__(self, torques: FloatArray, valid: BoolArray, errors: list[CogIdError | None],
+                 positions: FloatArray | Callable[[], FloatArray], active_positions: FloatArray,
+                 residual: FloatArray, condition: FloatArray) -> None:
         self.torques = torques
         self.valid = valid
         self.errors = errors
@@ -58,13 +68,13 @@ class Evaluation:
         self.condition_number = condition
 
     @property
-    def positions(self):
+    def positions(self) -> FloatArray:
         if callable(self._positions):
             self._positions = self._positions()
         return self._positions
 
     @positions.setter
-    def positions(self, value):
+    def positions(self, value: FloatArray) -> None:
         self._positions = value
 
 
@@ -72,7 +82,8 @@ class Batch:
     """The batch driver of one mechanism, around its per-sample solver (and its kernel for
     closed poses: ``sample_solver.whole_name``, whose records :meth:`positions` returns)."""
 
-    def __init__(self, mechanism, sample_solver, joints_at):
+    def __init__(self, mechanism: 'Mechanism', sample_solver: SampleSolver,
+                 joints_at: Callable[[FloatArray], tuple[FloatArray, Any]]) -> None:
         self.mechanism = mechanism
         self.joints_at = joints_at      # the joints as written from the coordinates
         self.serial = sample_solver
@@ -81,7 +92,8 @@ class Batch:
         self.whole_many = getattr(kernels, name + '_many')
         self.layout, self.record_type = kernels.layouts[name], RECORDS[name]
 
-    def evaluate_one(self, state, q, qd, qdd, on_invalid):
+    def evaluate_one(self, state: 'State', q: FloatArray, qd: FloatArray, qdd: FloatArray,
+                     on_invalid: str) -> tuple[Evaluation, 'State']:
         """(Evaluation of one sample (arrays (1, M)), new state), by the per-sample path."""
         try:
             sample = checked_sample(self.mechanism, self.serial.wrapping, q, qd, qdd)
@@ -94,13 +106,15 @@ class Batch:
         return self._one(new_state, np.array([record.torques]), None, record.worst,
                          record.condition), new_state
 
-    def _one(self, state, torques, error, residual, condition):
+    def _one(self, state: 'State', torques: FloatArray, error: CogIdError | None, residual: float,
+             condition: float) -> Evaluation:
         at = np.array([state[0]])
         return Evaluation(torques, np.array([error is None]), [error],
                           lambda: self.joints_at(at)[0], at[:, self.mechanism.active_index],
                           np.array([residual]), np.array([condition]))
 
-    def evaluate(self, state, q, qd, qdd, on_invalid):
+    def evaluate(self, state: 'State', q: FloatArray, qd: FloatArray, qdd: FloatArray,
+                 on_invalid: str) -> tuple[Evaluation, 'State']:
         """(Evaluation of N > 1 samples, new state)."""
         m = self.mechanism
         n, n_act = q.shape
@@ -117,8 +131,8 @@ class Batch:
             tau = record.torques.copy()
             residual = record.worst.copy()
             condition = record.condition.copy()
-        for i, exc in errors_in.items():
-            errors[i] = exc
+        for k, exc in errors_in.items():
+            errors[k] = exc
         ok &= finite & np.isfinite(tau).all(axis=1)
         for i in np.flatnonzero(~ok):
             exc = errors[i]
@@ -132,7 +146,10 @@ class Batch:
         return Evaluation(tau, ok, errors, lambda: self.joints_at(positions)[0],
                           positions[:, m.active_index], residual, condition), new_state
 
-    def positions(self, state, qa, on_invalid, invalid=None, qd=None, qdd=None):
+    def positions(self, state: 'State', qa: FloatArray, on_invalid: str,
+                  invalid: BoolArray | None = None, qd: FloatArray | None = None,
+                  qdd: FloatArray | None = None
+                  ) -> tuple[Any, FloatArray, BoolArray, list[Any], 'State']:
         """Solve N samples of active coordinates ``qa`` (N, M) from the warm start ``state``.
 
         Returns (PoseRecord of arrays at the solutions, with the rates ``qd``, ``qdd``
@@ -154,13 +171,14 @@ class Batch:
         ok = (converged & (record.condition <= m.max_condition_number) &
               (mismatch <= m.setpoint_tolerance) & ~invalid)
         ok &= self.continues(state, qa, positions, record.basis)      # 3. the serial rules
-        errors = [None] * n
+        errors: list[Any] = [None] * n
         redone = self.resolve_serially(state, qa, positions, basis, ok, invalid, errors,
                                        on_invalid)
         new_state = self.finish(state, (qa, qd, qdd), flat, positions, basis, ok, redone)
         return record, positions, ok, errors, new_state
 
-    def anchors(self, state, qa, invalid):
+    def anchors(self, state: 'State', qa: FloatArray,
+                invalid: BoolArray) -> tuple[IntArray, FloatArray, FloatArray]:
         """Step 1: serial anchors every continuation step of actuator travel, each solved
         from the last (an anchor that fails is left out). Returns the knots of step 2:
         their sample indices (-1: the warm start, the first knot), poses and bases."""
@@ -173,6 +191,7 @@ class Batch:
         is_anchor = np.diff(np.concatenate([[0.0], np.floor(arc)])) > 0
         is_anchor[-1] = True
         is_anchor &= ~invalid
+        knots_at: list[Any]             # -1, then the anchors' np.intp indices
         knots_at, knots_q, knots_v, walk = [-1], [state[0]], [state[1]], state
         for a in np.flatnonzero(is_anchor):
             try:
@@ -184,7 +203,8 @@ class Batch:
             knots_v.append(walk[1])
         return np.array(knots_at), np.array(knots_q), np.array(knots_v)
 
-    def interpolated_starts(self, state, qa, knots_at, knots_q, knots_v):
+    def interpolated_starts(self, state: 'State', qa: FloatArray, knots_at: IntArray,
+                            knots_q: FloatArray, knots_v: FloatArray) -> FloatArray:
         """Step 2: a start for every sample between its neighbouring anchors (the knots):
         the cubic Hermite interpolation in the sample index of the anchors' poses and rates
         dq/di = V dz/di (dz/di by central differences of the setpoints), fourth order in the
@@ -221,7 +241,9 @@ class Batch:
         guess[:, m.primary_joints] = z
         return guess
 
-    def finish(self, state, setpoints, flat, positions, basis, ok, redone):
+    def finish(self, state: 'State', setpoints: Sequence[FloatArray], flat: FloatArray,
+               positions: FloatArray, basis: '_Bases', ok: BoolArray,
+               redone: BoolArray) -> 'State':
         """Step 4: the new warm start (the last good sample's pose and basis), the poses of
         the samples not ok set to it (keeps NaN out of their lanes), and the flat dynamics
         outputs evaluated again where the poses changed. Returns the new state."""
@@ -238,7 +260,8 @@ class Batch:
             flat[changed] = self.whole_many(positions[changed], *(x[changed] for x in setpoints))
         return new_state
 
-    def close(self, guess, qa, qd, qdd):
+    def close(self, guess: FloatArray, qa: FloatArray, qd: FloatArray,
+              qdd: FloatArray) -> tuple[FloatArray, FloatArray, BoolArray, FloatArray]:
         """Newton on every sample at once from ``guess`` (N, n_joints), then for redundant
         actuation the projection onto the setpoints ``qa``. Returns (positions, flat
         dynamics outputs there, converged (N,), redundant mismatch (N,))."""
@@ -263,7 +286,7 @@ class Batch:
             converged[todo] &= self.closed(self.record(flat[todo]))
         return q, flat, converged, np.abs(q[:, m.active_index] - qa).max(axis=1)
 
-    def newton(self, q):
+    def newton(self, q: FloatArray) -> tuple[FloatArray, BoolArray]:
         """Newton's method on the loop equations of all samples at once, by the closure
         kernel: each pass evaluates the samples not closed yet. A sample found closed takes
         the increment evaluated with that check too (it costs nothing and makes the pose
@@ -295,28 +318,30 @@ class Batch:
             with np.errstate(divide='ignore', invalid='ignore'):
                 factor = np.where(size > NEWTON_MAX_INCREMENT, NEWTON_MAX_INCREMENT / size, 1.0)
             factor = np.where(np.isfinite(factor), factor, 0.0)
-            q[np.ix_(todo, free)] -= record.increment * factor[:, None]
+            # (numpy's stubs take arrays only; ix_ takes a list of ints as well)
+            q[np.ix_(todo, free)] -= record.increment * factor[:, None]  # type: ignore[arg-type]
             todo = todo[~done]
             if not todo.size:
                 break
         return q, converged
 
-    def exact_step(self):
+    def exact_step(self) -> float:
         """A Newton increment below which the pose it leads to is closed to well within
         the closure tolerance: 0.01 sqrt(tolerance) (rad or m; 1e-7 at the default 1e-10).
         After an increment s the residual is about C s^2, C the loops' curvature (about 1
         per metre on the Stewart platform): this leaves room for C up to 1e4."""
         return 0.01 * math.sqrt(self.mechanism.closure_tolerance)
 
-    def closed(self, record):
+    def closed(self, record: Any) -> BoolArray:
         """(N,) bool: the loops of each sample are closed (closure.loops_closed)."""
         return closure.loops_closed(record.worst, record.least_cosine,
                                     self.mechanism.closure_tolerance)
 
-    def record(self, flat):
+    def record(self, flat: FloatArray) -> Any:
         return unpack(flat, self.layout, self.record_type)
 
-    def continues(self, start_state, qa, positions, free_rows):
+    def continues(self, start_state: 'State', qa: FloatArray, positions: FloatArray,
+                  free_rows: FloatArray) -> BoolArray:
         """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for
         i = 0) and within the Newton correction bound of its first-order prediction, i.e.
         where the serial path would have taken it in one step from there. ``free_rows``:
@@ -337,8 +362,9 @@ class Batch:
         return (near.all(axis=1) & (np.abs(moved) <= limits[free]).all(axis=1) &
                 (np.abs(positions - predicted) <= bounds).all(axis=1))
 
-    def resolve_serially(self, start_state, qa, positions, basis, ok, invalid, errors,
-                         on_invalid):
+    def resolve_serially(self, start_state: 'State', qa: FloatArray, positions: FloatArray,
+                         basis: '_Bases', ok: BoolArray, invalid: BoolArray, errors: list[Any],
+                         on_invalid: str) -> BoolArray:
         """Re-solve, in order, every sample not ``ok`` by serial continuation from the last
         good sample before it; a sample after one that changed is checked again. Updates
         the arrays in place; returns the (N,) mask of the samples re-solved."""
@@ -378,7 +404,7 @@ class Batch:
                 heapq.heappush(pending, i + 1)
         return redone
 
-    def one_step(self, state, target, solution):
+    def one_step(self, state: 'State', target: Any, solution: FloatArray) -> bool:
         """The serial rule of :meth:`continues` for one sample (lists and arrays of floats)."""
         m = self.mechanism
         target = target.tolist()
@@ -387,13 +413,13 @@ class Batch:
                 correction_ok(solution.tolist(), predicted, self.serial.bounds))
 
 
-def _wrapped(dz, revolute):
+def _wrapped(dz: FloatArray, revolute: BoolArray) -> FloatArray:
     """Actuator differences (N, dof), those of revolute ones (mask) within pi (a warm start
     may be whole turns away from the setpoints)."""
     return np.where(revolute, dz - 2.0 * np.pi * np.round(dz / (2.0 * np.pi)), dz)
 
 
-def _by_knot(bases, knot, dz):
+def _by_knot(bases: FloatArray, knot: IntArray, dz: FloatArray) -> FloatArray:
     """V_k dz of every sample, V_k = bases[knot[i]] (K, n_joints, dof), knot non-decreasing:
     one product per run of samples that share a knot, no (N, n_joints, dof) copy."""
     out = np.empty((len(dz), bases.shape[1]))
@@ -407,13 +433,14 @@ class _Bases:
     """The velocity bases V (n_joints, dof) of N samples, made per sample when asked for
     from the records' free rows (N, n_free, dof); re-solved samples' bases as set."""
 
-    def __init__(self, layout, free_rows):
-        self.layout, self.free_rows, self.solved = layout, free_rows, {}
+    def __init__(self, layout: 'BasisLayout', free_rows: FloatArray) -> None:
+        self.solved: dict[int, FloatArray] = {}
+        self.layout, self.free_rows = layout, free_rows
 
-    def __getitem__(self, i):
+    def __getitem__(self, i: int) -> FloatArray:
         if i in self.solved:
             return self.solved[i]
         return self.layout.array(self.free_rows[i])
 
-    def __setitem__(self, i, basis):
+    def __setitem__(self, i: int, basis: FloatArray) -> None:
         self.solved[i] = np.asarray(basis, dtype=float)

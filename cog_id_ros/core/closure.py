@@ -20,11 +20,14 @@ loop (its cycle through the tree plus the loop joint itself), so A is assembled 
 joint twists of forward_kinematics; its time derivative along the motion, the bias beta
 with A qddot + beta = 0, comes from the acceleration recursion.
 """
+from typing import Any, Iterable, Sequence
+
 import numpy as np
 
 from . import kinematics as kin
 from . import spatial as sp
 from .lane_linalg import QRLeastSquares
+from .value_types import FloatArray, Lane, LaneMatrix, Lanes, Ops, Twist, Twists
 
 
 class LoopState:
@@ -32,26 +35,60 @@ class LoopState:
     angle between the two attachment frames (a half-turn also zeroes the residual; 1.0
     where the orientation is free); universal: its two axes a, b (base frame)."""
     __slots__ = ('x', 'residual', 'cosine', 'a', 'b')
+    x: Any
+    residual: Any
+    cosine: Lane
+    a: Any
+    b: Any
 
 
-def loop_closure(model, frames, q, ops):
+class UnitQuaternion:
+    """The closure row of a spherical tree joint's quaternion (its LoopJoint's ``cycle``
+    lists the four coordinates): |q|^2 - 1 = 0, velocity row 2 q . qdot, bias 2 |qdot|^2
+    (d2/dt2 |q|^2 = 2 q . qddot + 2 |qdot|^2); the other five rows zero."""
+
+    closure_equations = 1
+
+    def closure_state(self, lp: kin.LoopJoint, frames: kin.Frames, q: Lanes,
+                      ops: Ops) -> LoopState:
+        st = LoopState()
+        st.x = tuple(q[c] for c, _ in lp.cycle)
+        st.residual = (sum(v * v for v in st.x) - 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        st.cosine = 1.0
+        return st
+
+    def closure_columns(self, lp: kin.LoopJoint, st: LoopState, frames: kin.Frames,
+                        columns: LaneMatrix, row: int) -> None:
+        for (c, _), v in zip(lp.cycle, st.x):
+            columns[c][row] = 2.0 * v
+
+    def closure_bias(self, lp: kin.LoopJoint, st: LoopState, frames: kin.Frames, twists: Twists,
+                     bias_acc: Twists, qdot: Lanes) -> tuple[Lane, ...]:
+        return (2.0 * sum(qdot[c] * qdot[c] for c, _ in lp.cycle), 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def loop_closure(model: kin.KinematicModel, frames: kin.Frames, q: Sequence[Lane],
+                 ops: Ops) -> list[LoopState]:
     """Residuals of every constraint at configuration q (frames from forward_kinematics)."""
     return [lp.kind.closure_state(lp, frames, q, ops) for lp in model.constraints]
 
 
-def closure_jacobian_columns(model, frames, loops):
+def closure_jacobian_columns(model: kin.KinematicModel, frames: kin.Frames,
+                             loops: Sequence[LoopState]) -> list[list[Lane]]:
     """A as a list of columns (one per coordinate, each a list of 6 L lanes; rows [v(x); w]
     of every constraint)."""
     n_rows = 6 * len(model.constraints)
-    columns = [[0.0] * n_rows for _ in range(model.n_coordinates)]
+    columns: list[list[Lane]] = [[0.0] * n_rows for _ in range(model.n_coordinates)]
     for li, (lp, st) in enumerate(zip(model.constraints, loops)):
         lp.kind.closure_columns(lp, st, frames, columns, 6 * li)
     return columns
 
 
-def closure_bias(model, frames, loops, twists, bias_acc, qdot):
+def closure_bias(model: kin.KinematicModel, frames: kin.Frames, loops: Sequence[LoopState],
+                 twists: Sequence[Twist], bias_acc: Sequence[Twist],
+                 qdot: Sequence[Lane]) -> list[Lane]:
     """beta with A qddot + beta = 0: the closure equations differentiated twice at qddot = 0."""
-    beta = []
+    beta: list[Lane] = []
     for lp, st in zip(model.constraints, loops):
         beta.extend(lp.kind.closure_bias(lp, st, frames, twists, bias_acc, qdot))
     return beta
@@ -65,9 +102,18 @@ class ClosureSolution:
     iterations.
     """
     __slots__ = ('q', 'frames', 'loops', 'columns', 'lsq', 'residual', 'converged', 'iterations')
+    q: Sequence[Lane]
+    frames: kin.Frames
+    loops: list[LoopState]
+    columns: list[list[Lane]]
+    lsq: QRLeastSquares
+    residual: Lane
+    converged: Lane
+    iterations: int
 
 
-def evaluate(model, q, free, ops):
+def evaluate(model: kin.KinematicModel, q: Sequence[Lane], free: Sequence[int],
+             ops: Ops) -> ClosureSolution:
     """Forward kinematics, closure residual and Jacobian, QR of the free columns at q."""
     sol = ClosureSolution()
     sol.q = q
@@ -80,14 +126,15 @@ def evaluate(model, q, free, ops):
     return sol
 
 
-def loops_closed(residual, least_cosine, tolerance):
+def loops_closed(residual: Lane, least_cosine: Lane, tolerance: float) -> Lane:
     """The loops are closed: the largest closure residual below ``tolerance`` and every
     cosine positive (``least_cosine`` the least of them: a loop closed a half-turn off has
     a zero residual too). Floats, or (N,) arrays for an (N,) bool array; False for NaN."""
     return (residual < tolerance) & (least_cosine > 0.0)
 
 
-def closure_jacobian_matrix(model, q):
+def closure_jacobian_matrix(model: kin.KinematicModel,
+                            q: Iterable[float]) -> tuple[FloatArray, ClosureSolution]:
     """A at one configuration as a numpy matrix (6 constraints x coordinates), for load-time
     analysis."""
     sol = evaluate(model, list(q), [], sp.ScalarOps)
@@ -97,7 +144,8 @@ def closure_jacobian_matrix(model, q):
     return matrix, sol
 
 
-def assemble(model, q, tol, fixed=(), max_iter=100, max_step=0.2):
+def assemble(model: kin.KinematicModel, q: Iterable[float], tol: float, fixed: Iterable[int] = (),
+             max_iter: int = 100, max_step: float = 0.2) -> tuple[list[float], float, bool]:
     """Close every loop from ``q`` moving every coordinate but ``fixed`` (minimum-norm
     Gauss-Newton steps).
 

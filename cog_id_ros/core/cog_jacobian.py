@@ -10,17 +10,25 @@ Rows of every 6-vector: linear velocity (or acceleration) of the COG, then angul
 when actuator m moves at unit rate and the others stand still: the link twists obtained by
 pushing column m of the active-to-joint map S (joint_motion.py) through the tree.
 """
+from typing import Sequence
+
 from . import spatial as sp
-from .kinematics import link_twists
+from .kinematics import Frames, link_twists
+from .value_types import Lane, MechanismLike, Rotation, Twist, Vec3
+
+Cog = tuple[Vec3, Rotation]        # (COG position, link rotation)
+Motion = tuple[Vec3, Vec3]        # (linear, angular): a column of G_i, a velocity, a drift
 
 
-def cog_poses(mechanism, frames):
+def cog_poses(mechanism: MechanismLike, frames: Frames) -> list[Cog]:
     """g_i (eq. 1): per link (COG position, link rotation as a row-major 9-tuple)."""
     return [(sp.add(frames.pos[i], sp.mat_vec(frames.rot[i], com)), frames.rot[i])
             for i, com in enumerate(mechanism.link_com)]
 
 
-def cog_jacobians(mechanism, frames, cogs, velocity_map):
+def cog_jacobians(mechanism: MechanismLike, frames: Frames, cogs: Sequence[Cog],
+                  velocity_map: Sequence[Sequence[Lane]]
+                  ) -> tuple[list[list[Motion]], list[list[Twist]]]:
     """G_i (eq. 3): per link, per actuator m, the 6-vector (v_cog, w) for thetadot_m = 1.
 
     Also returns the unit link twists, from which any link twist follows by linearity.
@@ -28,7 +36,7 @@ def cog_jacobians(mechanism, frames, cogs, velocity_map):
     m = len(mechanism.active_joints)
     unit_twists = [link_twists(mechanism.model, frames, [row[a] for row in velocity_map])
                    for a in range(m)]
-    jac = []
+    jac: list[list[Motion]] = []
     for i, (c, _) in enumerate(cogs):
         cols = []
         for a in range(m):
@@ -38,7 +46,8 @@ def cog_jacobians(mechanism, frames, cogs, velocity_map):
     return jac, unit_twists
 
 
-def cog_velocities(jacobians, thetadot):
+def cog_velocities(jacobians: Sequence[Sequence[Motion]],
+                   thetadot: Sequence[Lane]) -> list[Motion]:
     """qdot_i = G_i thetadot (eq. 2): per link (v_cog, w)."""
     out = []
     for cols in jacobians:
@@ -49,7 +58,8 @@ def cog_velocities(jacobians, thetadot):
     return out
 
 
-def cog_drifts(cogs, velocities, drift_accelerations):
+def cog_drifts(cogs: Sequence[Cog], velocities: Sequence[Motion],
+               drift_accelerations: Sequence[Twist]) -> list[Motion]:
     """Gdot_i thetadot (eq. 4, second term): COG acceleration and link angular acceleration
     when thetaddot = 0, from the links' spatial accelerations at thetaddot = 0."""
     out = []
@@ -60,7 +70,8 @@ def cog_drifts(cogs, velocities, drift_accelerations):
     return out
 
 
-def cog_accelerations(jacobians, drifts, thetaddot):
+def cog_accelerations(jacobians: Sequence[Sequence[Motion]], drifts: Sequence[Motion],
+                      thetaddot: Sequence[Lane]) -> list[Motion]:
     """qddot_i = G_i thetaddot + Gdot_i thetadot (eq. 4): per link (a_cog, alpha)."""
     out = []
     for cols, (a, alpha) in zip(jacobians, drifts):

@@ -22,6 +22,15 @@ method on the loop equations. The rules, shared by every serial path of the solv
   bounded amount of work whatever the input.
 """
 import math
+from typing import TYPE_CHECKING, Any, Sequence
+
+from .value_types import Lane
+
+if TYPE_CHECKING:
+    from .mechanism import Mechanism
+
+#: a pose on its branch: (every coordinate, the velocity basis V there)
+State = tuple[Sequence[Lane], Any]
 
 #: largest Newton correction of a step, as a fraction of the joints' step limits
 CORRECTOR_RATIO = 0.5
@@ -39,13 +48,13 @@ MAX_ANGLE = 1e9
 TWO_PI = 2.0 * math.pi
 
 
-def length_scale(mechanism):
+def length_scale(mechanism: 'Mechanism') -> float:
     """A length typical of the mechanism (m): the mean of its nonzero joint offsets.
 
     Prismatic continuation steps are ``step * length_scale``, so a mechanism of 5 cm
     takes steps of millimetres and one of 5 m steps of decimetres.
     """
-    lengths = []
+    lengths: list[float] = []
     for spec in mechanism.joint_specs:
         for xyz in (spec.parent_xyz, spec.child_xyz):
             norm = math.sqrt(sum(x * x for x in xyz))
@@ -54,7 +63,7 @@ def length_scale(mechanism):
     return sum(lengths) / len(lengths) if lengths else 1.0
 
 
-def joint_step_limits(mechanism, step):
+def joint_step_limits(mechanism: 'Mechanism', step: float) -> list[float]:
     """Per coordinate, the largest motion of one continuation step, as its joint's kind
     shares it out (joints.py: rad, or m for a length; a quaternion's components move by
     half the angle: step / 2)."""
@@ -62,17 +71,18 @@ def joint_step_limits(mechanism, step):
     return [kind.step_share(step, scale) for kind in mechanism.model.coordinate_kinds]
 
 
-def wrapping_actuators(mechanism):
+def wrapping_actuators(mechanism: 'Mechanism') -> list[int]:
     """Indices into active_joints of the actuators whose coordinates wrap at 2 pi (the
     revolute ones: ``kind.wraps``)."""
     return [a for a, kind in enumerate(mechanism.active_kinds) if kind.wraps]
 
 
-def wrapped_state(mechanism, wrapping, state, target):
+def wrapped_state(mechanism: 'Mechanism', wrapping: Sequence[int], state: State,
+                  target: Sequence[float]) -> State:
     """``state`` with every revolute actuator moved by the multiple of 2 pi that brings it
     within pi of ``target``; the same state object when none has to move."""
     q, basis = state
-    shifted = None
+    shifted: list[Lane] | None = None
     for a in wrapping:
         j = mechanism.active_index[a]
         turns = round((target[a] - q[j]) / TWO_PI)
@@ -83,7 +93,8 @@ def wrapped_state(mechanism, wrapping, state, target):
     return state if shifted is None else (shifted, basis)
 
 
-def prediction(mechanism, state, goal):
+def prediction(mechanism: 'Mechanism', state: State,
+               goal: Sequence[Lane]) -> tuple[list[Lane], list[Lane]]:
     """The first-order predictor ``q + V dz`` (primary actuators at ``goal``) and the
     increment of every joint it makes."""
     q, basis = state
@@ -101,7 +112,8 @@ def prediction(mechanism, state, goal):
     return predicted, moved
 
 
-def fits_one_step(mechanism, limits, state, target, moved):
+def fits_one_step(mechanism: 'Mechanism', limits: Sequence[float], state: State,
+                  target: Sequence[float], moved: Sequence[float]) -> bool:
     """True when the move to ``target`` is one step: no primary actuator moves, and no joint
     is predicted to move (``moved``, from :func:`prediction`), by more than its limit.
 
@@ -118,26 +130,29 @@ def fits_one_step(mechanism, limits, state, target, moved):
     return True
 
 
-def step_ratio(mechanism, limits, state, target, moved):
+def step_ratio(mechanism: 'Mechanism', limits: Sequence[float], state: State,
+               target: Sequence[float], moved: Sequence[float]) -> float:
     """How many step limits the move to ``target`` is: the largest of |actuator motion| and
     |predicted joint motion| over the joints' limits."""
     return max(actuator_ratio(mechanism, limits, state, target),
                max(abs(dx) / lim for dx, lim in zip(moved, limits)))
 
 
-def actuator_ratio(mechanism, limits, state, target):
+def actuator_ratio(mechanism: 'Mechanism', limits: Sequence[float], state: State,
+                   target: Sequence[float]) -> float:
     """The actuators' share of :func:`step_ratio` (the steps a straight move needs at least)."""
     q = state[0]
     return max(abs(target[a] - q[j]) / limits[j]
                for a, j in zip(mechanism.primary, mechanism.primary_joints))
 
 
-def correction_bounds(limits):
+def correction_bounds(limits: Sequence[float]) -> list[float]:
     """Per joint, the largest Newton correction of a step: CORRECTOR_RATIO of its limit."""
     return [CORRECTOR_RATIO * lim for lim in limits]
 
 
-def correction_ok(corrected, predicted, bounds):
+def correction_ok(corrected: Sequence[Lane], predicted: Sequence[Lane],
+                  bounds: Sequence[float]) -> bool:
     """True when Newton's correction of the prediction stays within ``bounds`` (from
     :func:`correction_bounds`) for every joint: the step stayed on its branch."""
     for x, p, b in zip(corrected, predicted, bounds):
@@ -146,7 +161,8 @@ def correction_ok(corrected, predicted, bounds):
     return True
 
 
-def intermediate_goal(mechanism, state, target, fraction):
+def intermediate_goal(mechanism: 'Mechanism', state: State, target: Sequence[float],
+                      fraction: float) -> list[float]:
     """The active coordinates ``fraction`` of the way from ``state`` to ``target``."""
     q = state[0]
     return [q[j] + (t - q[j]) * fraction for t, j in zip(target, mechanism.active_index)]

@@ -1,31 +1,39 @@
 """Degrees of freedom at load, and the actuators that drive them.
 
 At the assembled pose (assembly.py) the degrees of freedom are read off the rank of the
-closure Jacobian A there: dof = coordinates - rank(A). The actuators must determine the
-motion: of the active joints, ``dof`` are *primary* (those whose coordinates determine all
-others best, the smallest condition number of A's other columns), the rest of a redundant
-set secondary. Every way this can fail raises MechanismConfigError with what to change.
+closure Jacobian A there, with a unit row per locked joint (held at its initial position):
+dof = coordinates - rank. The actuators must determine the motion: free motion that is left
+is either idle spins (rods between two ball joints, which idle_spins.py refuses or locks)
+or refused as a missing actuator. Of the active joints, ``dof`` are *primary* (those whose
+coordinates determine all others best, the smallest condition number of A's other
+columns), the rest of a redundant set secondary; actuators that are dependent without
+``torque_weights`` saying so are reported (:func:`report_dependent`). Every way this can
+fail raises MechanismConfigError with what to change.
 """
 import itertools
 import math
 
 import numpy as np
 
-from . import closure, spherical_chains
+from . import assembly, closure, idle_spins, spherical_chains
 from .assembly import check_loops_hint
 from .errors import MechanismConfigError
+from .value_types import FloatArray, MechanismLike
 
 #: relative singular value below which A loses rank
 RANK_TOLERANCE = 1e-9
 
 
-def count(mech, moved, problem):
+def count(mech: MechanismLike, moved: str | None,
+          problem: MechanismConfigError | None) -> tuple[FloatArray, int, int]:
     """(A, rank of A, dof) at mech.assembled_coordinates; ``moved``, ``problem``: what
     assembly.assemble said about actuators it had to move (``problem`` is raised here,
     after a rigid mechanism, whose message is the clearer one)."""
     n = mech.n_coordinates
     matrix, _ = closure.closure_jacobian_matrix(mech.model, mech.assembled_coordinates)
-    singular_values = np.linalg.svd(matrix, compute_uv=False) if matrix.size else np.zeros(0)
+    equations = idle_spins.with_locks(mech, matrix)    # locked joints held
+    singular_values = (np.linalg.svd(equations, compute_uv=False) if equations.size
+                       else np.zeros(0))
     rank = _rank(singular_values)
     dof = n - rank
     m = len(mech.active_joints)
@@ -39,65 +47,41 @@ def count(mech, moved, problem):
             f'loop every revolute axis is normal to the plane, every prismatic one in it), '
             f'or a loop with too few joints; {check_loops_hint(mech, None)}'
             + (f' (the loops closed only after moving {moved} away from '
-               f'initial_positions)' if moved else ''))
+               f'initial_positions)' if moved else '')
+            + (f"; the locked joints ({', '.join(mech.locked_joints)}, held at their initial "
+               f'positions) count: mechanism.locked_joints' if mech.locked_joints else ''))
     if problem is not None:
         raise problem
     if m < dof:
-        hidden = n - len(mech.joints)
-        moving = _free_with_actuators_held(mech, matrix)
-        raise MechanismConfigError(
-            'mechanism.active_joints',
-            f'{m} active joint(s) for {dof} degrees of freedom (closure rank '
-            f'{rank} of {n} coordinates'
-            + (f', {hidden} of them hidden: the spherical and universal joints in the '
-               f'spanning tree' if hidden else '')
-            + ', at the assembled initial positions): the motion is not determined'
-            + (f": with every actuator held, {', '.join(moving)} can still move" if moving
-               else '')
-            + '; add active (revolute or prismatic) joints, or remove the idle freedom: a '
-              'link between two spherical joints (a rod with a ball at each end) spins '
-              'about the line through their centres, so write one of them as `type: '
-              'universal`; or, if the mechanism has fewer freedoms than that, it is at a '
-              'singular pose there (e.g. three revolute joints written for a spherical '
-              'one, with the middle one at +-pi/2: gimbal lock; write it as `type: '
-              'spherical`, or change initial_positions)')
+        idle_spins.resolve(mech, matrix, rank, dof)   # raises: locks to add, or what moves
     return matrix, rank, dof
 
 
-def _free_with_actuators_held(mech, matrix):
-    """Names of the joints that can still move with every actuator held: those whose
-    coordinates the null space of the closure Jacobian's other columns moves."""
-    held = set(mech.active_index)
-    free = [j for j in range(mech.n_coordinates) if j not in held]
-    if not free or not matrix.size:
-        return []
-    _, values, vt = np.linalg.svd(matrix[:, free])
-    null = vt[_rank(values):]
-    if not null.size:
-        return []
-    names = mech.model.coordinate_joints
-    return list(dict.fromkeys(names[free[k]] for k in
-                              np.flatnonzero(np.abs(null).max(axis=0) > 1e-6)))
-
-
-def primary_actuators(mech, matrix, dof):
+def primary_actuators(mech: MechanismLike, matrix: FloatArray, dof: int) -> list[int]:
     """Indices (into active_joints) of ``dof`` actuators whose coordinates determine all
     others best (smallest condition number); the rest of a redundant set are secondary.
 
     ``matrix`` is the closure Jacobian at the assembled positions; the condition number
     of its free columns is the Frobenius one the solver uses (lane_linalg), from their
     singular values: ||A_f||_F ||A_f^+||_F."""
-    best, best_cond = None, math.inf
+    best: tuple[int, ...] | None = None
+    best_cond = math.inf
     n = mech.n_coordinates
     combos = itertools.combinations(range(len(mech.active_index)), dof)
+    locked = set(mech.locked_index)
     for combo in itertools.islice(combos, 5000):
-        fixed = {mech.active_index[i] for i in combo}
+        fixed = {mech.active_index[i] for i in combo} | locked
         free = [j for j in range(n) if j not in fixed]
         cond = _condition_number(matrix[:, free])
         if cond < best_cond * (1.0 - 1e-9):    # ties: the first combination
             best, best_cond = combo, cond
     if best is None or not best_cond <= mech.max_condition_number:
         hint = _gimbal_lock_hint(mech)
+        if mech.locked_joints and not hint:
+            hint = (f"; the locked joints ({', '.join(mech.locked_joints)}) may not be the "
+                    f'ones to lock: a joint with a small share of an idle spin barely holds it '
+                    f'(without mechanism.locked_joints the load names each spin and its '
+                    f'shares)')
         if mech.assembly_warnings and not hint:
             hint = ('; the assembly also had to move joints far from initial_positions ('
                     'see assembly_warnings): most likely the geometry (xyz, rpy, axis) or '
@@ -110,7 +94,26 @@ def primary_actuators(mech, matrix, dof):
     return list(best)
 
 
-def _gimbal_lock_hint(mech):
+def report_dependent(mech: MechanismLike, matrix: FloatArray) -> None:
+    """An assembly warning naming the actuators that do not move independently, when the
+    mechanism is redundant and ``mechanism.torque_weights`` does not say that is meant."""
+    if not mech.is_redundant or mech.weights_given:
+        return
+    dependent = idle_spins.dependent_actuators(mech, matrix)
+    assembly.note(
+        mech,
+        f"the actuators do not all move independently: {', '.join(map(repr, dependent))} "
+        f'determine each other with the loops closed ({len(mech.active_joints)} active '
+        f'joints for {mech.dof} degrees of freedom), so the mechanism is treated as '
+        f'redundantly actuated: their setpoints must agree with the loop closure within '
+        f'mechanism.setpoint_tolerance and the torques are shared among them (least squares, '
+        f'mechanism.torque_weights). If that is meant, give mechanism.torque_weights (then '
+        f'this is not reported); if not, check mechanism.active_joints and the joints of the '
+        f'loops they are in (a joint of the wrong type or axis, a ball joint written as a '
+        f'revolute one)')
+
+
+def _gimbal_lock_hint(mech: MechanismLike) -> str:
     """What to do where three revolute joints through massless links (a ball joint as
     written, spherical_chains.py) are near their gimbal lock at the assembled pose."""
     chains = [chain for chain in spherical_chains.chains_of(mech, near_lock=True)
@@ -125,14 +128,14 @@ def _gimbal_lock_hint(mech):
             f'joint, which has no lock, or give initial_positions away from it')
 
 
-def _rank(singular_values):
+def _rank(singular_values: np.ndarray) -> int:
     """The rank that singular values (descending) give: those above RANK_TOLERANCE times
     the largest (or times 1, if that is smaller)."""
     scale = max(1.0, singular_values[0]) if singular_values.size else 1.0
     return int(np.sum(singular_values > RANK_TOLERANCE * scale))
 
 
-def _condition_number(a):
+def _condition_number(a: FloatArray) -> float:
     """||A||_F ||A^+||_F of a matrix with at least as many rows as columns (inf if the
     columns are dependent); 1.0 for no columns, like QRLeastSquares.condition_number."""
     rows, cols = a.shape

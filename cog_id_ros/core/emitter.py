@@ -22,8 +22,15 @@ function returns exactly what the lane code returns on floats.
 """
 from importlib import resources
 import math
+from typing import Any, Callable, Sequence
 
-from .straight_line import Sym, leaves, live_operations
+from .straight_line import Graph, Sym, leaves, live_operations
+from .value_types import Lane
+
+#: a kernel's parameters: (name, its input Syms, nested for rows)
+Params = Sequence[tuple[str, Any]]
+#: a kernel's record fields: (name, a Sym, a float or nested lists of them)
+Fields = Sequence[tuple[str, Any]]
 
 #: each operation as a Python expression ({0}, {1}: the operands); sqrt and recip as
 #: spatial.ScalarOps defines them
@@ -43,7 +50,7 @@ PYTHON_EXPRESSIONS = {
 }
 
 
-def python_source(name, params, record, fields):
+def python_source(name: str, params: Params, record: str, fields: Fields) -> tuple[str, int]:
     """Source of ``def name(*params)`` returning ``record(*fields)``.
 
     params: (parameter name, list of input Syms from ``graph.inputs``), each parameter a
@@ -52,17 +59,17 @@ def python_source(name, params, record, fields):
     Returns (source, number of operations).
     """
     outputs, graph, operations = _program(params, fields)
-    names = {}
+    names: dict[int, str] = {}
     lines = [f'def {name}({", ".join(p for p, _ in params)}):']
     for p, syms in params:
         if syms:
             lines.append(f'    {_unpacking(p, syms, names)} = {p}')
 
-    def operand(a):
+    def operand(a: int | float) -> str:
         return names[a] if isinstance(a, int) else _literal(a)
 
     inline = _inlined(graph, operations, outputs)
-    depth = {}
+    depth: dict[int, int] = {}
     for k in operations:
         op, args = graph.nodes[k]
         text = PYTHON_EXPRESSIONS[op].format(*map(operand, args))
@@ -73,7 +80,7 @@ def python_source(name, params, record, fields):
             names[k] = f't{k}'
             lines.append(f'    t{k} = {text}')
 
-    def literal(value):
+    def literal(value: Any) -> str:
         if isinstance(value, (list, tuple)):
             items = [literal(x) for x in value]
             return '(' + ', '.join(items) + (',)' if len(items) == 1 else ')')
@@ -89,13 +96,13 @@ def python_source(name, params, record, fields):
 INLINE_DEPTH = 12
 
 
-def _inlined(graph, operations, outputs):
+def _inlined(graph: Graph, operations: Sequence[int], outputs: Sequence[Lane]) -> set[int]:
     """The operations the Python emitter writes into their only user's expression instead of
     a variable of their own (a store and a load fewer, the same operations in an order
     that gives the same numbers: every operation is a pure function of its operands).
     Those used once, by an operation whose expression names that operand once (not the
     conditional ones, sqrt, recip, max, min), and not an output."""
-    uses = {}
+    uses: dict[int, int] = {}
     for k in operations:
         op, args = graph.nodes[k]
         for a in args:
@@ -108,7 +115,7 @@ def _inlined(graph, operations, outputs):
     return {k for k in operations if uses.get(k) == 1}
 
 
-def _program(params, fields):
+def _program(params: Params, fields: Fields) -> tuple[list[Lane], Any, list[int]]:
     """What both emitters write: the kernel's outputs (leaves of ``fields``), their graph and
     the operations they depend on, in recording order."""
     outputs = [x for _, value in fields for x in leaves(value)]
@@ -118,7 +125,7 @@ def _program(params, fields):
     return outputs, graph, operations
 
 
-def _unpacking(prefix, syms, names):
+def _unpacking(prefix: str, syms: Sequence[Any], names: dict[int, str]) -> str:
     """The target list that unpacks a parameter (nested lists: rows) into its inputs."""
     items = []
     for i, s in enumerate(syms):
@@ -130,16 +137,18 @@ def _unpacking(prefix, syms, names):
     return ', '.join(items) + (',' if len(items) == 1 else '')
 
 
-def python_function(name, params, record_type, fields):
+def python_function(name: str, params: Params, record_type: type,
+                    fields: Fields) -> tuple[Callable[..., Any], str, int]:
     """The function of :func:`python_source`, compiled; returns (function, source, count)."""
     source, count = python_source(name, params, record_type.__name__, fields)
-    namespace = {'new': tuple.__new__, 'sin': math.sin, 'cos': math.cos, 'sqrt': math.sqrt,
-                 'inf': math.inf, 'nan': math.nan, record_type.__name__: record_type}
+    namespace: dict[str, Any] = {
+        'new': tuple.__new__, 'sin': math.sin, 'cos': math.cos, 'sqrt': math.sqrt,
+        'inf': math.inf, 'nan': math.nan, record_type.__name__: record_type}
     exec(compile(source, f'<kernel {name}>', 'exec'), namespace)   # noqa: S102
     return namespace[name], source, count
 
 
-def _literal(x):
+def _literal(x: float) -> str:
     x = float(x)
     if math.isnan(x):
         return 'nan'
@@ -173,13 +182,13 @@ C_EXPRESSIONS = {
 C_PRELUDE = 'kernels_prelude.c'
 
 
-def c_prelude(n_kernels):
+def c_prelude(n_kernels: int) -> str:
     """The C prelude of a module of ``n_kernels`` kernels."""
     text = resources.files(__package__).joinpath(C_PRELUDE).read_text(encoding='ascii')
     return text.replace('N_KERNELS', str(n_kernels))
 
 
-def _c_literal(x):
+def _c_literal(x: float) -> str:
     x = float(x)
     if math.isnan(x):
         return 'NAN'
@@ -189,7 +198,7 @@ def _c_literal(x):
     return f'({text})' if x < 0 or text.startswith('-') else text
 
 
-def _field_shape(value):
+def _field_shape(value: Any) -> tuple[Any, ...]:
     """('scalar',) | ('vector', n) | ('rows', n_rows, width) of a record field's value."""
     if not isinstance(value, (list, tuple)):
         return ('scalar',)
@@ -198,20 +207,20 @@ def _field_shape(value):
     return ('vector', len(value))
 
 
-def c_kernel_source(index, name, params, fields):
+def c_kernel_source(index: int, name: str, params: Params, fields: Fields) -> tuple[str, int, int]:
     """C source of one kernel ``name(*params)`` returning record type ``index``'s instance
     of ``fields`` (as :func:`python_source`), and of ``name_many``, the same kernel over N
     samples at once (see :func:`c_module_source`). Returns (source, number of operations,
     number of outputs)."""
     outputs, graph, operations = _program(params, fields)
-    names = {}
+    names: dict[int, str] = {}
     for p, syms in params:
         for k, s in enumerate(leaves(syms)):
             names[s.k] = f'{p}[{k}]'
     for k in operations:
         names[k] = f't{k}'
 
-    def operand(a):
+    def operand(a: int | float) -> str:
         return names[a] if isinstance(a, int) else _c_literal(a)
 
     sizes = [len(leaves(syms)) for _, syms in params]
@@ -229,7 +238,8 @@ def c_kernel_source(index, name, params, fields):
     return '\n'.join(lines) + '\n', len(operations), len(outputs)
 
 
-def _c_one_sample(index, name, params, fields, sizes, n_out):
+def _c_one_sample(index: int, name: str, params: Params, fields: Fields, sizes: Sequence[int],
+                  n_out: int) -> list[str]:
     """Lines of ``kernel_name``: one sample, Python sequences in, a record out."""
     lines = [f'static PyObject *kernel_{name}(PyObject *self, PyObject *const *args, '
              f'Py_ssize_t nargs)', '{',
@@ -247,7 +257,8 @@ def _c_one_sample(index, name, params, fields, sizes, n_out):
                   '        return NULL;']
     lines += [f'    double out[{max(n_out, 1)}];',
               f'    body_{name}({", ".join(p for p, _ in params)}, out);']
-    built, offset = [], 0
+    built: list[str] = []
+    offset = 0
     for field, value in fields:
         shape = _field_shape(value)
         if shape[0] == 'scalar':
@@ -275,7 +286,7 @@ def _c_one_sample(index, name, params, fields, sizes, n_out):
                     '}', '']
 
 
-def _c_many(name, params, sizes, n_out):
+def _c_many(name: str, params: Params, sizes: list[int], n_out: int) -> list[str]:
     """Lines of ``kernel_name_many``: N samples, C-contiguous float64 buffers (N, width)
     in, one (N, outputs) written."""
     widths = ', '.join(str(w) for w in sizes + [n_out])
@@ -299,7 +310,9 @@ def _c_many(name, params, sizes, n_out):
             '}']
 
 
-def c_module_source(module, kernels, extra='', extra_methods=()):
+def c_module_source(module: str, kernels: Sequence[tuple[str, Params, str, Fields]],
+                    extra: str = '', extra_methods: Sequence[tuple[str, str, str]] = ()
+                    ) -> tuple[str, dict[str, int]]:
     """C source of a CPython extension module ``module`` with one function per kernel.
 
     kernels: list of (name, params, record type name, fields) as for :func:`python_source`.
@@ -312,7 +325,7 @@ def c_module_source(module, kernels, extra='', extra_methods=()):
     function, doc), METH_FASTCALL). Returns (source, {name: operations}).
     """
     parts = [c_prelude(len(kernels))]
-    counts = {}
+    counts: dict[str, int] = {}
     for index, (name, params, _, fields) in enumerate(kernels):
         source, counts[name], _ = c_kernel_source(index, name, params, fields)
         parts.append(source)

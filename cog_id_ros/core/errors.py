@@ -23,7 +23,7 @@ class CogIdError(Exception):
 
     #: a key of REASONS for errors about a sample; 'config' for MechanismConfigError (a
     #: parameter, not a sample); None otherwise
-    reason = None
+    reason: str | None = None
 
 
 class MechanismConfigError(CogIdError, ValueError):
@@ -35,7 +35,7 @@ class MechanismConfigError(CogIdError, ValueError):
 
     reason = 'config'
 
-    def __init__(self, parameter, message):
+    def __init__(self, parameter: str, message: str) -> None:
         self.parameter = parameter
         super().__init__(f'{parameter}: {message}')
 
@@ -46,7 +46,7 @@ class SetpointError(CogIdError, ValueError):
     ``reason``: 'malformed', 'non_finite', 'out_of_range' or 'limit'.
     """
 
-    def __init__(self, message, sample=None, reason='malformed'):
+    def __init__(self, message: str, sample: int | None = None, reason: str = 'malformed') -> None:
         assert reason in ('malformed', 'non_finite', 'out_of_range', 'limit'), reason
         self.sample = sample
         self.reason = reason
@@ -62,7 +62,8 @@ class ClosureError(CogIdError):
     ``mechanism.setpoint_tolerance`` (``residual`` is then that disagreement).
     """
 
-    def __init__(self, message, residual, sample=None, reason='closure'):
+    def __init__(self, message: str, residual: float, sample: int | None = None,
+                 reason: str = 'closure') -> None:
         assert reason in ('closure', 'unreachable', 'inconsistent'), reason
         self.residual = float(residual)
         self.sample = sample
@@ -76,7 +77,7 @@ class SingularConfigurationError(CogIdError):
 
     reason = 'singular'
 
-    def __init__(self, message, condition_number, sample=None):
+    def __init__(self, message: str, condition_number: float, sample: int | None = None) -> None:
         self.condition_number = float(condition_number)
         self.sample = sample
         super().__init__(message)

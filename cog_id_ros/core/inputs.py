@@ -7,11 +7,16 @@ beyond +-MAX_ANGLE rad, or torques that overflow, 'out_of_range'; an actuator ou
 position limits (``joints.<name>.lower`` / ``upper``, from a URDF's ``<limit>``) 'limit'.
 """
 import math
+from typing import TYPE_CHECKING, Any, Iterable, Sequence
 
 import numpy as np
 
 from .continuation import MAX_ANGLE
 from .errors import SetpointError
+from .value_types import FloatArray
+
+if TYPE_CHECKING:
+    from .mechanism import Mechanism
 
 #: the types of a control loop's setpoints (the fast path of setpoints)
 _FLOAT = {float}
@@ -20,7 +25,9 @@ _FLOAT = {float}
 LABELS = ('q', 'qd', 'qdd')
 
 
-def setpoints(mechanism, wrapping, q, qd, qdd, limits=True, labels=LABELS):
+def setpoints(mechanism: 'Mechanism', wrapping: Sequence[int], q: Any, qd: Any, qdd: Any,
+              limits: bool = True, labels: Sequence[str] = LABELS
+              ) -> tuple[Any, Any, Any, bool]:
     """The one way setpoints come in: (q, qd, qdd, single).
 
     One sample: three lists of M floats, checked: SetpointError for a value not finite, a
@@ -39,7 +46,7 @@ def setpoints(mechanism, wrapping, q, qd, qdd, limits=True, labels=LABELS):
                 and all(-MAX_ANGLE <= q[a] <= MAX_ANGLE for a in wrapping) \
                 and (not limits or within_limits(mechanism, q)):
             return q, qd, qdd, True
-    sample = []
+    sample: list[list[float]] = []
     for value in (q, qd, qdd):
         if value is None and sample:             # qd, qdd: zeros (q is required)
             sample.append([0.0] * m)
@@ -66,7 +73,9 @@ def setpoints(mechanism, wrapping, q, qd, qdd, limits=True, labels=LABELS):
     return q, qd, qdd, True
 
 
-def checked_sample(mechanism, wrapping, q, qd, qdd, limits=True, labels=LABELS):
+def checked_sample(mechanism: 'Mechanism', wrapping: Sequence[int], q: FloatArray, qd: FloatArray,
+                   qdd: FloatArray, limits: bool = True, labels: Sequence[str] = LABELS
+                   ) -> tuple[list[float], list[float], list[float]]:
     """One sample given as arrays (1, M) as three lists of floats, or the SetpointError
     :func:`check_values` finds."""
     _, errors = check_values(mechanism, wrapping, q, qd, qdd, True, limits, labels)
@@ -75,14 +84,16 @@ def checked_sample(mechanism, wrapping, q, qd, qdd, limits=True, labels=LABELS):
     return q[0].tolist(), qd[0].tolist(), qdd[0].tolist()
 
 
-def rates(mechanism, qd):
+def rates(mechanism: 'Mechanism', qd: Any) -> list[float]:
     """One sample of rates ``qd`` alone (M) as a list of floats, checked as :func:`setpoints`
     checks rates."""
     zeros = [0.0] * len(mechanism.active_joints)
     return setpoints(mechanism, (), zeros, qd, zeros, limits=False)[1]
 
 
-def setpoint_arrays(mechanism, q, qd, qdd, labels=LABELS):
+def setpoint_arrays(mechanism: 'Mechanism', q: Any, qd: Any, qdd: Any,
+                    labels: Sequence[str] = LABELS
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
     """(q, qd, qdd) as float arrays of shape (N, M), and whether it was one sample.
 
     ``q`` is required; ``qd`` and ``qdd`` default to zeros. One sample is (M,), or a
@@ -92,10 +103,10 @@ def setpoint_arrays(mechanism, q, qd, qdd, labels=LABELS):
     m = len(names)
     if q is None:
         raise SetpointError(f'q: required, one position per active joint {names}')
-    arrays = [_float_array(label, value, m) if value is not None else None
-              for label, value in zip(labels, (q, qd, qdd))]
+    arrays: list[Any] = [_float_array(label, value, m) if value is not None else None
+                         for label, value in zip(labels, (q, qd, qdd))]
     single = arrays[0].ndim == 1
-    out = []
+    out: list[FloatArray] = []
     for label, array in zip(labels, arrays):
         if array is None:
             out.append(np.zeros((1 if single else arrays[0].shape[0], m)))
@@ -109,21 +120,23 @@ def setpoint_arrays(mechanism, q, qd, qdd, labels=LABELS):
     return out[0], out[1], out[2], single
 
 
-def within_limits(mechanism, q):
+def within_limits(mechanism: 'Mechanism', q: Sequence[float]) -> bool:
     """Every limited actuator of one sample (a list of floats) within its position limits."""
     return all(lo <= q[a] <= hi for a, lo, hi in mechanism.limited_actuators)
 
 
-def check_values(mechanism, wrapping, q, qd, qdd, single, limits=True, labels=LABELS):
+def check_values(mechanism: 'Mechanism', wrapping: Sequence[int], q: FloatArray, qd: FloatArray,
+                 qdd: FloatArray, single: bool, limits: bool = True,
+                 labels: Sequence[str] = LABELS) -> tuple[Any, dict[int, SetpointError]]:
     """SetpointError for the first non-finite entry, revolute position beyond MAX_ANGLE,
     or actuator outside its position limits (unless not ``limits``); returns (per-sample
     bool array, {sample: error})."""
     finite = (np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) &
               np.isfinite(qdd).all(axis=1))
     in_range = (np.abs(q[:, wrapping]) <= MAX_ANGLE).all(axis=1) if wrapping else finite
-    for a, lo, hi in mechanism.limited_actuators if limits else ():
-        in_range = in_range & (q[:, a] >= lo) & (q[:, a] <= hi)
-    errors = {}
+    for k, lo, hi in mechanism.limited_actuators if limits else ():
+        in_range = in_range & (q[:, k] >= lo) & (q[:, k] <= hi)
+    errors: dict[int, SetpointError] = {}
     for i in np.flatnonzero(~(finite & in_range)):
         where = '' if single else f'sample {i}: '
         for label, array in zip(labels, (q, qd, qdd)):
@@ -152,7 +165,7 @@ def check_values(mechanism, wrapping, q, qd, qdd, single, limits=True, labels=LA
     return finite & in_range, errors
 
 
-def _float_array(label, value, m):
+def _float_array(label: str, value: Any, m: int) -> FloatArray:
     """``value`` as a float array; a plain number is one sample when m == 1. SetpointError
     (reason 'malformed') for strings, mappings, booleans, ragged or non-numeric input."""
     if isinstance(value, (str, bytes, dict, bool, np.bool_)) or (
@@ -187,7 +200,7 @@ def _float_array(label, value, m):
     return array
 
 
-def out_of_range(qd, qdd, sample):
+def out_of_range(qd: Iterable[float], qdd: Iterable[float], sample: int | None) -> SetpointError:
     """SetpointError(reason='out_of_range') for finite input whose torques overflow."""
     where = '' if sample is None else f'sample {sample}: '
     largest = max([abs(x) for x in list(qd) + list(qdd)] or [0.0])

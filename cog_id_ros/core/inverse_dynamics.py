@@ -7,13 +7,14 @@
 
 Successive calls keep the assembly branch: each is warm-started from the previous one.
 """
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import spatial as sp
 from .batch import Batch, Evaluation
 from .cog_jacobian import cog_poses
+from .continuation import State
 from .errors import MechanismConfigError, SetpointError
 from .forward_solve import LABELS, ForwardSolver
 from .inputs import out_of_range, rates, setpoint_arrays, setpoints
@@ -22,7 +23,7 @@ from .kernels import kernels_for
 from .lanes import stacked
 from .mechanism import Mechanism
 from .pipeline import cog_jacobians_at, cog_motion, equation_of_motion
-from .poses import PoseSolver
+from .poses import Poses, PoseSolver
 from .sample_solve import SampleSolver
 
 ArrayLike = Union[float, Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -56,8 +57,8 @@ class InverseDynamics:
         self._serial = SampleSolver(solved, kernels, self.continuation_step)
         self._batch = Batch(solved, self._serial, mechanism.joints_at)
         self._poses = PoseSolver(mechanism, self._serial, self._batch)
-        self._forward = ForwardSolver(solved, kernels, self.continuation_step,
-                                      mechanism.joints_at)
+        self._kernels = kernels
+        self._forward: Optional[ForwardSolver] = None     # made on first use
         self.reset()
 
     @property
@@ -71,7 +72,7 @@ class InverseDynamics:
         start = list(m.assembled_coordinates)
         q, record, _, _ = self._serial.close(start, [start[j] for j in m.active_index],
                                              self._serial.zeros, self._serial.zeros)
-        self._state = (list(q), self._serial.basis(record))
+        self._state: State = (list(q), self._serial.basis(record))
 
     def torques(self, q: ArrayLike, qd: Optional[ArrayLike] = None,
                 qdd: Optional[ArrayLike] = None) -> np.ndarray:
@@ -97,6 +98,9 @@ class InverseDynamics:
         """
         positions, rates_in, efforts, single = setpoints(
             self.mechanism, self._serial.wrapping, q, qd, tau, labels=LABELS)
+        if self._forward is None:       # (its kernels are loaded, or built, now)
+            self._forward = ForwardSolver(self._solved, self._kernels, self.continuation_step,
+                                          self.mechanism.joints_at)
         if single:
             record, self._state = self._forward.one(self._state, positions, rates_in, efforts)
             return np.array(record.accelerations)
@@ -120,7 +124,7 @@ class InverseDynamics:
         q, qd, qdd, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, qdd)
         if not single:
             raise SetpointError(f'sample_torques takes one sample (one number per active '
-                                f'joint), got shape {q.shape}: use torques() for a batch')
+                                f'joint), got shape {np.shape(q)}: use torques() for a batch')
         return self._serve_one(q, qd, qdd)
 
     def evaluate(self, q: ArrayLike, qd: Optional[ArrayLike] = None,
@@ -170,7 +174,7 @@ class InverseDynamics:
         if qd is None:
             return m.joints_at(q)[0].tolist(), None
         rates_in = rates(m, qd)
-        qdot = combine(active_velocity_map(self._solved, basis, sp.ScalarOps), rates_in)
+        qdot: Any = combine(active_velocity_map(self._solved, basis, sp.ScalarOps), rates_in)
         positions, qdot = m.joints_at(q, qdot)
         if not np.isfinite(qdot).all():
             raise out_of_range(rates_in, [], None)
@@ -212,12 +216,13 @@ class InverseDynamics:
 
     # --- helpers ------------------------------------------------------------------------
 
-    def _serve_one(self, target, qd, qdd):
+    def _serve_one(self, target: Any, qd: Any,
+                   qdd: Any) -> list[float]:
         """Torques of one well-formed sample (lists of floats); the warm start moves on."""
         record, self._state = self._serial.solve_torques(self._state, target, qd, qdd)
         return list(record.torques)
 
-    def _moved_to(self, at, values, keep=False):
+    def _moved_to(self, at: Poses, values: np.ndarray, keep: bool = False) -> np.ndarray:
         """``values`` computed at ``at``, once known to be finite: the warm start moves to
         ``at`` (unless ``keep``: more values follow). SetpointError (out_of_range) naming the
         first sample where they are not finite."""

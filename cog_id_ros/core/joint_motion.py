@@ -14,36 +14,44 @@ The accelerations satisfy A qddot + beta = 0 (closure.closure_bias). With c any 
 (c_p = 0, c_f = -A_f^+ beta), qddot = S thetaddot + (c - S c_a): the last term is the
 drift, Gdot thetadot in the paper's eq. (4) once mapped onto the links.
 """
+from typing import Any, Sequence
+
 import numpy as np
 
+from .closure import ClosureSolution
 from .lane_linalg import solve_spd
+from .value_types import FloatArray, Lane, LaneMatrix, MechanismLike, Ops
+
+Matrix = Sequence[Sequence[Lane]]
 
 
 class BasisLayout:
     """How V is made of its rows: the free joints' rows (-T, as the lane code solves them or
-    a dynamics record returns them: kernels.PoseRecord.basis) and the primary actuators'
-    unit rows (I). The one place that puts them together, for one sample as a list over
+    a dynamics record returns them: kernels.PoseRecord.basis), the primary actuators'
+    unit rows (I) and the locked joints' zero rows (idle_spins.py: they do not move). The
+    one place that puts them together, for one sample as a list over
     joints (what the lane code and the kernels take) or as arrays."""
 
-    def __init__(self, mechanism):
+    def __init__(self, mechanism: MechanismLike) -> None:
         m = mechanism
         self.free = m.free_joints
         self.shape = (m.n_coordinates, m.dof)
+        self.zero_row = [0.0] * m.dof
         #: (joint, its row) of every primary actuator: constant, shared by every V made here
         self.unit_rows = [(j, [1.0 if i == k else 0.0 for i in range(m.dof)])
                           for k, j in enumerate(m.primary_joints)]
 
-    def rows(self, free_rows):
+    def rows(self, free_rows: Sequence[list[Lane]]) -> LaneMatrix:
         """V (a list over joints of rows over the primary actuators) from the rows of the
         free joints, in mechanism.free_joints order."""
-        rows = [None] * self.shape[0]
+        rows = [self.zero_row] * self.shape[0]     # the locked joints' rows stay zero
         for j, row in self.unit_rows:
             rows[j] = row
         for j, row in zip(self.free, free_rows):
             rows[j] = row
         return rows
 
-    def array(self, free_rows):
+    def array(self, free_rows: Any) -> FloatArray:
         """V as an array (n_joints, dof) from the free rows (n_free, dof); of N samples
         (N, n_joints, dof) from (N, n_free, dof)."""
         free_rows = np.asarray(free_rows, dtype=float)
@@ -54,7 +62,7 @@ class BasisLayout:
         return basis
 
 
-def velocity_basis(mechanism, sol):
+def velocity_basis(mechanism: MechanismLike, sol: ClosureSolution) -> LaneMatrix:
     """V as a list over joints of lists over the ``dof`` primary actuators (lanes)."""
     columns = [sol.columns[j] for j in mechanism.primary_joints]
     t = [sol.lsq.solve(col) for col in columns]           # A_f^+ A_p, column by column
@@ -62,7 +70,7 @@ def velocity_basis(mechanism, sol):
                                         for i in range(len(mechanism.free_joints))])
 
 
-def projection_gram(mechanism, basis):
+def projection_gram(mechanism: MechanismLike, basis: Matrix) -> tuple[LaneMatrix, LaneMatrix]:
     """(V_a^T W^-1 V_a, V_a^T W^-1): the normal equations of the weighted projection."""
     w_inv = mechanism.inverse_torque_weights
     rows = [basis[j] for j in mechanism.active_index]
@@ -73,12 +81,12 @@ def projection_gram(mechanism, basis):
     return gram, va_t_winv
 
 
-def active_velocity_map(mechanism, basis, ops):
+def active_velocity_map(mechanism: MechanismLike, basis: Matrix, ops: Ops) -> LaneMatrix:
     """S (list over joints of lists over active joints): qdot = S thetadot."""
     if not mechanism.is_redundant:
         order = mechanism.primary             # primary k is active joint order[k]
         m = len(order)
-        s = [[0.0] * m for _ in basis]
+        s: LaneMatrix = [[0.0] * m for _ in basis]
         for j, row in enumerate(basis):
             for k, a in enumerate(order):
                 s[j][a] = row[k]
@@ -90,7 +98,8 @@ def active_velocity_map(mechanism, basis, ops):
     return [[sum(row[k] * x[k][a] for k in range(dof)) for a in range(m)] for row in basis]
 
 
-def projection_increment(mechanism, basis, q, target, ops):
+def projection_increment(mechanism: MechanismLike, basis: Matrix, q: Sequence[Lane],
+                         target: Sequence[Lane], ops: Ops) -> list[Lane]:
     """Redundant actuation: the Gauss-Newton increment dz (one per primary actuator) towards
     the closed pose nearest ``target`` in the W^-1 metric, min (q_a - target)^T W^-1
     (q_a - target); the pose moves by -V dz (:func:`projected_pose`), then closes again."""
@@ -100,7 +109,8 @@ def projection_increment(mechanism, basis, q, target, ops):
     return [row[0] for row in solve_spd(gram, rhs, ops)]
 
 
-def projected_pose(mechanism, q, basis, dz):
+def projected_pose(mechanism: MechanismLike, q: Sequence[Lane], basis: Matrix,
+                   dz: Sequence[Lane]) -> list[Lane]:
     """q - V dz, the primary actuators moved by exactly -dz (before the loops close again)."""
     moved = [x - sum(b * d for b, d in zip(row, dz)) for x, row in zip(q, basis)]
     for k, j in enumerate(mechanism.primary_joints):
@@ -108,10 +118,11 @@ def projected_pose(mechanism, q, basis, dz):
     return moved
 
 
-def closure_drift(mechanism, sol, velocity_map, beta):
+def closure_drift(mechanism: MechanismLike, sol: ClosureSolution, velocity_map: Matrix,
+                  beta: Sequence[Lane]) -> list[Lane]:
     """d = c - S c_a with A c = -beta, c = 0 on the primary joints (list over joints)."""
     n = mechanism.n_coordinates
-    c = [0.0] * n
+    c: list[Lane] = [0.0] * n
     if beta:
         for j, value in zip(mechanism.free_joints, sol.lsq.solve(beta)):
             c[j] = -value
@@ -121,6 +132,6 @@ def closure_drift(mechanism, sol, velocity_map, beta):
     return [c[j] - sum(s * ca for s, ca in zip(velocity_map[j], c_active)) for j in range(n)]
 
 
-def combine(matrix, vector):
+def combine(matrix: Matrix, vector: Sequence[Lane]) -> list[Lane]:
     """matrix @ vector for a list-of-rows matrix of lanes."""
     return [sum(m * v for m, v in zip(row, vector)) for row in matrix]

@@ -26,26 +26,30 @@ docs/adding_a_joint_kind.md walks through writing one. :func:`register` adds a k
 too: URDF's 'continuous' is a revolute joint without limits, :attr:`Revolute.aliases`).
 """
 import math
+from typing import Callable, Iterable, Iterator, Sequence
 
 from . import kinematics as kin
 from . import spatial as sp
-from .closure import LoopState
+from .closure import LoopState, UnitQuaternion
 from .errors import MechanismConfigError
+from .kinematics import Frames, JointSpec, KinematicModel, LoopJoint, TreeEdge
+from .parameters import ParameterReader
+from .value_types import Lane, LaneMatrix, Lanes, Ops, Rotation, Transform, Twist, Twists, Vec3
 
 #: how far from perpendicular (cosine) a universal joint's two axes may be written
 AXES_PERPENDICULAR = 1e-6
 
 #: the registered kinds by ``type``, in the order messages list them
-KINDS = {}
+KINDS: dict[str, type['JointKind']] = {}
 
 
-def register(kind_class):
+def register(kind_class: type['JointKind']) -> type['JointKind']:
     """Make ``kind_class`` a ``type`` of the parameter file (usable as a decorator)."""
     KINDS[kind_class.name] = kind_class
     return kind_class
 
 
-def kind(name, aliases=False):
+def kind(name: str, aliases: bool = False) -> type['JointKind'] | None:
     """The kind class of ``type`` ``name``, or None; with ``aliases``, also under the names
     a robot format gives it (a URDF reader's 'continuous')."""
     found = KINDS.get(name)
@@ -54,27 +58,28 @@ def kind(name, aliases=False):
     return found
 
 
-def names():
+def names() -> tuple[str, ...]:
     """The ``type`` names, in registration order."""
     return tuple(KINDS)
 
 
-def parameter_names():
+def parameter_names() -> tuple[str, ...]:
     """Every key some kind reads beyond those all joints have, in registration order."""
     return tuple(dict.fromkeys(key for k in KINDS.values() for key in k.parameters))
 
 
-def unit_axis(r, name, default):
+def unit_axis(r: ParameterReader, name: str, default: Sequence[float] | None) -> tuple[float, ...]:
     """A joint axis as a unit vector; MechanismConfigError for a missing (``default`` None)
     or zero-length one."""
     axis = r.vector(name, 3, default=default, required=default is None)
+    assert axis is not None      # a default, or required: missing raised
     norm = math.hypot(*axis)     # no overflow near 1e308, no underflow near 1e-308
     if not norm > 0.0:
         raise MechanismConfigError(name, f'must not be zero-length, got {list(axis)}')
     return tuple(a / norm for a in axis)
 
 
-def rotation_twist(axis, origin):
+def rotation_twist(axis: Vec3, origin: Vec3) -> Twist:
     """Unit twist (base frame, Pluecker) of a rotation about the line (origin, axis)."""
     return (axis, sp.cross(origin, axis))
 
@@ -84,62 +89,70 @@ class JointKind:
     its own that holds its two attachment frames together (all six closure rows)."""
 
     #: the ``type`` of the parameter file
-    name = ''
+    name: str = ''
     #: other names robot formats give this kind (see :func:`kind`)
-    aliases = ()
+    aliases: tuple[str, ...] = ()
     #: True: one coordinate of its own (in mechanism.joints, initial_positions; drivable)
     has_coordinate = False
     #: what Mechanism.coordinate_types shows for its coordinates (its own or hidden ones)
-    coordinate_type = None
+    coordinate_type: str | None = None
     #: the hidden coordinates it adds where it enters the spanning tree ('<joint>.<part>'),
     #: and their values where its attachment frames coincide (fewer enter the tree first)
-    hidden = ()
-    hidden_start = ()
+    hidden: tuple[str, ...] = ()
+    hidden_start: tuple[float, ...] = ()
     #: units of its coordinate and of its effort; whether an actuator's angle wraps at 2 pi
-    unit = effort_unit = None
+    unit: str | None = None
+    effort_unit: str | None = None
     wraps = False
     #: its two attachment origins stay together whatever its coordinates (a joint centre)
     origins_coincide = True
+    #: a ball joint: its child turns any way about the centre (a rod between two of them
+    #: can spin about its own axis, idle_spins.py)
+    turns_freely = False
     #: keys it reads beyond those of every joint; why it refuses the others' keys
-    parameters = ()
-    refused = {}
+    parameters: tuple[str, ...] = ()
+    refused: dict[str, str] = {}
     #: inspect: its closure equations where it closes a loop; its hidden coordinates
     closure_equations = 6
-    hidden_summary = hidden_detail = None
+    hidden_summary: str | None = None
+    hidden_detail: str | None = None
     #: the picture: its marker and legend entry (None: the legend's joint entries show
     #: it), whether it draws its axis, and where a planar mechanism's joints of this kind
     #: have their axis ('normal' to the plane, 'in_plane', 'any'; None: never planar)
+    legend: str | None
+    planar_axis: str | None
     marker, legend, draws_axis, planar_axis = 'D', None, False, 'any'
     #: its axes (in its parent attachment frame; a second one in its child's)
-    axis = (0.0, 0.0, 1.0)
-    axis2 = ()
+    axis: tuple[float, ...] = (0.0, 0.0, 1.0)
+    axis2: tuple[float, ...] = ()
 
     # a kind object is a value, its kind and its parameters (kernels.kernel_key reprs it)
-    def __repr__(self):
+    def __repr__(self) -> str:
         parameters = ', '.join(f'{key}={value!r}' for key, value in vars(self).items())
         return f'{type(self).__name__}({parameters})'
 
-    def __eq__(self, other):
+    def __eq__(self, other: object) -> bool:
         return type(self) is type(other) and vars(self) == vars(other)
 
-    def __hash__(self):
+    def __hash__(self) -> int:
         return hash((type(self), tuple(vars(self).items())))
 
     @classmethod
-    def read(cls, r, prefix):
+    def read(cls, r: ParameterReader, prefix: str) -> 'JointKind':
         """The kind object of joint ``prefix`` ('joints.<name>.') from its parameters (a
         parameters.ParameterReader), read and checked; the keys it does not read are
         refused afterwards (``refused`` says why for the keys of other kinds)."""
         return cls()
 
-    def step_share(self, step, length):
+    def step_share(self, step: float, length: float) -> float:
         """The largest motion of each of its coordinates in one continuation step of
         ``step`` (rad; ``length`` the mechanism's length scale, m)."""
         return step
 
     # --- in the spanning tree (kinematics.py) -----------------------------------------------
 
-    def enter_tree(self, model, spec, link, other):
+    def enter_tree(self, model: KinematicModel, spec: JointSpec, link: int,
+                   other: int) -> tuple[list[TreeEdge], list[LoopJoint]]:
         """([TreeEdge], [constraint LoopJoint]) that put ``spec`` into the tree from
         ``link`` (reached) to ``other``; ``model.hidden(spec)`` gives its hidden
         coordinates, ``model.virtual_link(name)`` a massless link."""
@@ -148,13 +161,13 @@ class JointKind:
         return [kin.TreeEdge(None, link, other, self, spec.name, r0=r0, t0=t0,
                              origin_p=a[1])], []
 
-    def place(self, frames, e, q, ops):
+    def place(self, frames: Frames, e: TreeEdge, q: Lanes, ops: Ops) -> None:
         """calc_X_FM and S: the pose of tree edge ``e``'s child link (``rot`` and ``pos`` of
         ``frames``) and the unit twist ``xi[c]`` of ``frames`` of each of its coordinates c,
         from the coordinates ``q`` (lanes) and its parent's frame."""
         frames.rot[e.child], frames.pos[e.child] = kin.to_base(frames, e.parent, e.r0, e.t0)
 
-    def child_twist(self, e, frames, twist, qdot):
+    def child_twist(self, e: TreeEdge, frames: Frames, twist: Twist | None, qdot: Lanes) -> Twist:
         """calc_V_FM: the child's twist, v_parent + sum_c xi_c qdot_c (``twist`` None: the
         parent is the base, at rest)."""
         for c in e.coords:
@@ -165,7 +178,8 @@ class JointKind:
                 twist = sp.twist_add_scaled(twist, xi, rate)
         return sp.ZERO_TWIST if twist is None else twist
 
-    def child_bias(self, e, frames, parent_twist, parent_acc, qdot):
+    def child_bias(self, e: TreeEdge, frames: Frames, parent_twist: Twist, parent_acc: Twist,
+                   qdot: Lanes) -> Twist:
         """calc_A_FM at qddot = 0: the child's bias acceleration. A twist fixed in the
         parent body changes at the rate v_parent x xi, so a_child = a_parent + sum_c
         (v_parent x xi_c) qdot_c; a grounded joint's twists are constant."""
@@ -177,22 +191,22 @@ class JointKind:
             a = sp.twist_add_scaled(a, rate_of_xi, qdot[c])
         return a
 
-    def start(self, model, e, q):
+    def start(self, model: KinematicModel, e: TreeEdge, q: list[float]) -> None:
         """Set the hidden coordinates of tree edge ``e`` in ``q`` for the start of assembly
         (they start at ``hidden_start``)."""
 
     # --- closing a loop (closure.py) --------------------------------------------------------
 
-    def loop_twist(self, frames, lp):
+    def loop_twist(self, frames: Frames, lp: LoopJoint) -> None:
         """The unit twist (``xi`` of ``frames``) of its own coordinate where it closes loop
         ``lp``."""
 
-    def moved_attachment(self, lp, q, ops):
+    def moved_attachment(self, lp: LoopJoint, q: Lanes, ops: Ops) -> Transform:
         """(rotation, origin) in the parent link of its parent attachment frame moved by
         the joint's motion, which the child attachment frame must coincide with."""
         return lp.d0, lp.t_pj
 
-    def closure_state(self, lp, frames, q, ops):
+    def closure_state(self, lp: LoopJoint, frames: Frames, q: Lanes, ops: Ops) -> LoopState:
         """The closure.LoopState of loop ``lp``: closure point x (the child attachment
         origin), residual Phi (6 lanes) and the cosine of the frames' angle."""
         r_moved, t_moved = self.moved_attachment(lp, q, ops)
@@ -203,24 +217,28 @@ class JointKind:
         self.residual(st, lp, frames, target, r_p, r_c)
         return st
 
-    def residual(self, st, lp, frames, target, r_p, r_c):
+    def residual(self, st: LoopState, lp: LoopJoint, frames: Frames, target: Vec3, r_p: Rotation,
+                 r_c: Rotation) -> None:
         """Phi = [x - o; 1/2 sum_k rP_k x rC_k]: the two frames coincide (``st.cosine`` rules
         out the half-turn that also zeroes the orientation rows)."""
         st.residual = sp.sub(st.x, target) + sp.orientation_error(r_p, r_c)
         st.cosine = sp.rotation_cosine(r_p, r_c)
 
-    def closure_columns(self, lp, st, frames, columns, row):
+    def closure_columns(self, lp: LoopJoint, st: LoopState, frames: Frames, columns: LaneMatrix,
+                        row: int) -> None:
         """Its columns of A in rows ``row``..``row + 5`` of ``columns`` (per coordinate):
         [v(x); w] of every coordinate's twist on the loop, signed."""
         for col, w, sign in _position_columns(lp, st, frames, columns, row):
             col[row + 3:row + 6] = sp.scale(w, sign)
 
-    def loop_bias(self, lp, frames, twists, bias_acc, qdot):
+    def loop_bias(self, lp: LoopJoint, frames: Frames, twists: Twists, bias_acc: Twists,
+                  qdot: Lanes) -> Twist:
         """The relative bias acceleration of the child over the parent link at qddot = 0."""
         return sp.twist_add_scaled(kin.twist_of(bias_acc, lp.child),
                                    kin.twist_of(bias_acc, lp.parent), -1.0)
 
-    def closure_bias(self, lp, st, frames, twists, bias_acc, qdot):
+    def closure_bias(self, lp: LoopJoint, st: LoopState, frames: Frames, twists: Twists,
+                     bias_acc: Twists, qdot: Lanes) -> tuple[Lane, ...]:
         """Its 6 entries of beta (A qddot + beta = 0): the closure rows differentiated twice
         at qddot = 0; the full six rows need no more than the relative acceleration (their
         relative twist is zero, or along the joint's own twist)."""
@@ -228,20 +246,22 @@ class JointKind:
         v, w = sp.twist_at(acc, st.x)
         return self.bias_rows(lp, st, twists, acc, v, w)
 
-    def bias_rows(self, lp, st, twists, acc, v, w):
+    def bias_rows(self, lp: LoopJoint, st: LoopState, twists: Twists, acc: Twist, v: Vec3,
+                  w: Vec3) -> tuple[Lane, ...]:
         """Its 6 entries of beta from the relative acceleration ``acc`` and (v, w), that
         acceleration at the closure point x."""
         return (*v, *w)
 
 
-def _across(spec, link):
+def _across(spec: JointSpec, link: int) -> tuple[Transform, Transform]:
     """The attachment frame of ``spec`` on ``link`` and the inverse of the one on its
     other link, (rotation, translation) each: A and B of the pose A M B across it."""
     near, far = ('parent', 'child') if spec.parent == link else ('child', 'parent')
     return kin.attachment(spec, near), sp.inverse_transform(*kin.attachment(spec, far))
 
 
-def _position_columns(lp, st, frames, columns, row):
+def _position_columns(lp: LoopJoint, st: LoopState, frames: Frames, columns: LaneMatrix,
+                      row: int) -> Iterator[tuple[list[Lane], Vec3, float]]:
     """Per coordinate of loop ``lp`` (its cycle, then its own with sign -1): its column,
     the position rows v(x) written, and (column, w, sign) handed on for the others."""
     entries = list(lp.cycle) + ([] if lp.joint is None else [(lp.joint, -1.0)])
@@ -252,7 +272,8 @@ def _position_columns(lp, st, frames, columns, row):
         yield col, w, sign
 
 
-def _point_bias(lp, st, twists, v):
+def _point_bias(lp: LoopJoint, st: LoopState, twists: Twists,
+                v: Vec3) -> tuple[Vec3, Vec3, Vec3, Vec3]:
     """The bias of a point constraint x_C = x_P: the relative acceleration at the moving
     point x has the term (w_C - w_P) x v_C(x). Returns (v, w_C, w_P, w_C - w_P)."""
     w_c, w_p = kin.twist_of(twists, lp.child)[0], kin.twist_of(twists, lp.parent)[0]
@@ -272,14 +293,14 @@ class CoordinateKind(JointKind):
     refused = {'axis2': 'has one axis (axis2 is the second axis of a universal joint)'}
     draws_axis = True
 
-    def __init__(self, axis=(0.0, 0.0, 1.0)):
+    def __init__(self, axis: Iterable[float] = (0.0, 0.0, 1.0)) -> None:
         self.axis = tuple(axis)
 
     @classmethod
-    def read(cls, r, prefix):
+    def read(cls, r: ParameterReader, prefix: str) -> 'CoordinateKind':
         return cls(unit_axis(r, prefix + 'axis', (0.0, 0.0, 1.0)))
 
-    def read_limits(self, r, prefix):
+    def read_limits(self, r: ParameterReader, prefix: str) -> tuple[tuple[float, float], float]:
         """((lower, upper), effort) of its coordinate, inf where not given."""
         lower, upper, effort = (r.number(prefix + key) for key in ('lower', 'upper', 'effort'))
         lower = -math.inf if lower is None else lower
@@ -293,7 +314,13 @@ class CoordinateKind(JointKind):
                                        f'must be positive (N m or N), got {effort!r}')
         return (lower, upper), effort
 
-    def oriented_edge(self, j, spec, tree_parent, tree_child):
+    #: each coordinate kind's own: the child's pose relative to its parent at coordinate
+    #: ``qj`` (e, qj, ops), and the unit twist of its coordinate (its axis, a point on it)
+    local_pose: Callable[[TreeEdge, Lane, Ops], Transform]
+    twist: Callable[[Vec3, Vec3], Twist]
+
+    def oriented_edge(self, j: int, spec: JointSpec, tree_parent: int,
+                      tree_child: int) -> tuple[TreeEdge, tuple[Rotation, Rotation, Vec3]]:
         """The tree edge of coordinate j with r0 = R_A R_B, t0 = t_A + R_A t_B, the axis and
         the joint origin in the tree parent's frame; and (R_A, R_B, t_B) for the rest."""
         r_pj, r_cj = sp.rpy_matrix(spec.parent_rpy), sp.rpy_matrix(spec.child_rpy)
@@ -308,18 +335,19 @@ class CoordinateKind(JointKind):
                             axis_p=sp.mat_vec(r_a, self.axis), origin_p=tuple(t_a))
         return edge, (r_a, r_b, t_b)
 
-    def place(self, frames, e, q, ops):
+    def place(self, frames: Frames, e: TreeEdge, q: Lanes, ops: Ops) -> None:
         r_local, t_local = self.local_pose(e, q[e.joint], ops)
         frames.rot[e.child], frames.pos[e.child] = kin.to_base(frames, e.parent, r_local,
                                                                t_local)
         axis = sp.scale(kin.vector_to_base(frames, e.parent, e.axis_p), e.sign)
         frames.xi[e.joint] = self.twist(axis, kin.point_to_base(frames, e.parent, e.origin_p))
 
-    def loop_twist(self, frames, lp):
+    def loop_twist(self, frames: Frames, lp: LoopJoint) -> None:
         axis = kin.vector_to_base(frames, lp.parent, lp.axis_p)
         frames.xi[lp.joint] = self.twist(axis, kin.point_to_base(frames, lp.parent, lp.t_pj))
 
-    def loop_bias(self, lp, frames, twists, bias_acc, qdot):
+    def loop_bias(self, lp: LoopJoint, frames: Frames, twists: Twists, bias_acc: Twists,
+                  qdot: Lanes) -> Twist:
         """...minus its own twist's rate: it turns with the parent link."""
         acc = super().loop_bias(lp, frames, twists, bias_acc, qdot)
         rate_of_xi = sp.motion_cross(kin.twist_of(twists, lp.parent), frames.xi[lp.joint])
@@ -338,7 +366,7 @@ class Revolute(CoordinateKind):
     unit, effort_unit, wraps = 'rad', 'N m', True
     marker, planar_axis = 'o', 'normal'
 
-    def tree_edge(self, j, spec, tree_parent, tree_child):
+    def tree_edge(self, j: int, spec: JointSpec, tree_parent: int, tree_child: int) -> TreeEdge:
         e, (r_a, r_b, t_b) = self.oriented_edge(j, spec, tree_parent, tree_child)
         k = sp.skew(self.axis)
         r_ak, r_ak2 = sp.mat_mat(r_a, k), sp.mat_mat(r_a, sp.mat_mat(k, k))
@@ -348,15 +376,15 @@ class Revolute(CoordinateKind):
         e.t2 = sp.mat_vec(r_ak2, t_b)
         return e
 
-    def local_pose(self, e, qj, ops):
+    def local_pose(self, e: TreeEdge, qj: Lane, ops: Ops) -> Transform:
         s, c1 = ops.sin(qj), 1.0 - ops.cos(qj)
         return (sp.mat_combination(e.r0, e.r1, s, e.r2, c1),
                 sp.vec_combination(e.t0, e.t1, s, e.t2, c1))
 
-    def twist(self, axis, origin):
+    def twist(self, axis: Vec3, origin: Vec3) -> Twist:
         return rotation_twist(axis, origin)
 
-    def moved_attachment(self, lp, q, ops):
+    def moved_attachment(self, lp: LoopJoint, q: Lanes, ops: Ops) -> Transform:
         qc = q[lp.joint]
         return sp.mat_combination(lp.d0, lp.d1, ops.sin(qc), lp.d2, 1.0 - ops.cos(qc)), lp.t_pj
 
@@ -371,21 +399,21 @@ class Prismatic(CoordinateKind):
     origins_coincide = False
     marker, legend, planar_axis = 's', 'prismatic joint', 'in_plane'
 
-    def step_share(self, step, length):
+    def step_share(self, step: float, length: float) -> float:
         return step * length
 
-    def tree_edge(self, j, spec, tree_parent, tree_child):
+    def tree_edge(self, j: int, spec: JointSpec, tree_parent: int, tree_child: int) -> TreeEdge:
         e, _ = self.oriented_edge(j, spec, tree_parent, tree_child)
         e.t1 = sp.scale(e.axis_p, e.sign)
         return e
 
-    def local_pose(self, e, qj, ops):
+    def local_pose(self, e: TreeEdge, qj: Lane, ops: Ops) -> Transform:
         return e.r0, sp.add_scaled(e.t0, e.t1, qj)
 
-    def twist(self, axis, origin):
+    def twist(self, axis: Vec3, origin: Vec3) -> Twist:
         return (sp.ZERO3, axis)
 
-    def moved_attachment(self, lp, q, ops):
+    def moved_attachment(self, lp: LoopJoint, q: Lanes, ops: Ops) -> Transform:
         return lp.d0, sp.add_scaled(lp.t_pj, lp.axis_p, q[lp.joint])
 
 
@@ -404,10 +432,11 @@ class Spherical(ClosureKind):
     the three position rows x - o = 0. In the tree: A R(q) B with a quaternion q = (w, x,
     y, z) of hidden coordinates, R = R_h(q) / |q|^2, whose rates give the angular velocity
     2 G(q) qdot / |q|^2 (no angle triple, so no gimbal lock anywhere), and the constraint
-    |q|^2 = 1 (:class:`UnitQuaternion`) that takes up the fourth coordinate."""
+    |q|^2 = 1 (closure.UnitQuaternion) that takes up the fourth coordinate."""
 
     name = 'spherical'
     coordinate_type = 'quaternion'
+    turns_freely = True
     hidden, hidden_start = ('w', 'x', 'y', 'z'), (1.0, 0.0, 0.0, 0.0)
     refused = {**ClosureKind.refused, **dict.fromkeys(('axis', 'axis2'), 'has no axis')}
     closure_equations = 3
@@ -415,10 +444,11 @@ class Spherical(ClosureKind):
     hidden_detail = 'a quaternion (4 numbers; |q| = 1 is a closure equation)'
     planar_axis = None
 
-    def step_share(self, step, length):
+    def step_share(self, step: float, length: float) -> float:
         return step / 2.0          # a quaternion's components move by half the angle
 
-    def enter_tree(self, model, spec, link, other):
+    def enter_tree(self, model: KinematicModel, spec: JointSpec, link: int,
+                   other: int) -> tuple[list[TreeEdge], list[LoopJoint]]:
         a, b = _across(spec, link)
         coords = model.hidden(spec)
         edge = kin.TreeEdge(None, link, other, self, spec.name, r0=a[0], r1=b[0], t0=a[1],
@@ -427,7 +457,7 @@ class Spherical(ClosureKind):
         unit.cycle = [(c, 1.0) for c in coords]
         return [edge], [unit]
 
-    def place(self, frames, e, q, ops):
+    def place(self, frames: Frames, e: TreeEdge, q: Lanes, ops: Ops) -> None:
         """A R(q) B (r0, t0: A; r1, t1: B), and the twists of the quaternion's components:
         rotations about 2 G(q)[:, k] / |q|^2 (parent attachment frame) through the centre."""
         rotation, rates = sp.quaternion_rotation([q[c] for c in e.coords], ops)
@@ -443,7 +473,7 @@ class Spherical(ClosureKind):
     # child_bias: the quaternion twists also change with q, but their rates add up to
     # 2 G(qdot) qdot / |q|^2 = 0 (and a term in q . qdot, zero on the unit sphere)
 
-    def start(self, model, e, q):
+    def start(self, model: KinematicModel, e: TreeEdge, q: list[float]) -> None:
         """Turned so that the link it reaches puts its other joint centres where their
         partners are (a least-squares fit of the rotation about the ball's centre,
         model.fitted_rotation); with fewer than two such centres, its frame parallel to
@@ -458,39 +488,20 @@ class Spherical(ClosureKind):
         for c, value in zip(e.coords, sp.rotation_quaternion(turn)):
             q[c] = value
 
-    def residual(self, st, lp, frames, target, r_p, r_c):
+    def residual(self, st: LoopState, lp: LoopJoint, frames: Frames, target: Vec3, r_p: Rotation,
+                 r_c: Rotation) -> None:
         st.residual = sp.sub(st.x, target) + (0.0, 0.0, 0.0)
         st.cosine = 1.0
 
-    def closure_columns(self, lp, st, frames, columns, row):
+    def closure_columns(self, lp: LoopJoint, st: LoopState, frames: Frames, columns: LaneMatrix,
+                        row: int) -> None:
         for _ in _position_columns(lp, st, frames, columns, row):
             pass                   # no orientation rows
 
-    def bias_rows(self, lp, st, twists, acc, v, w):
+    def bias_rows(self, lp: LoopJoint, st: LoopState, twists: Twists, acc: Twist, v: Vec3,
+                  w: Vec3) -> tuple[Lane, ...]:
         v, *_ = _point_bias(lp, st, twists, v)
         return (*v, 0.0, 0.0, 0.0)
-
-
-class UnitQuaternion:
-    """The closure row of a spherical tree joint's quaternion (its LoopJoint's ``cycle``
-    lists the four coordinates): |q|^2 - 1 = 0, velocity row 2 q . qdot, bias 2 |qdot|^2
-    (d2/dt2 |q|^2 = 2 q . qddot + 2 |qdot|^2); the other five rows zero."""
-
-    closure_equations = 1
-
-    def closure_state(self, lp, frames, q, ops):
-        st = LoopState()
-        st.x = tuple(q[c] for c, _ in lp.cycle)
-        st.residual = (sum(v * v for v in st.x) - 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        st.cosine = 1.0
-        return st
-
-    def closure_columns(self, lp, st, frames, columns, row):
-        for (c, _), v in zip(lp.cycle, st.x):
-            columns[c][row] = 2.0 * v
-
-    def closure_bias(self, lp, st, frames, twists, bias_acc, qdot):
-        return (2.0 * sum(qdot[c] * qdot[c] for c, _ in lp.cycle), 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @register
@@ -510,11 +521,11 @@ class Universal(ClosureKind):
     hidden_detail = '2 angles'
     draws_axis, planar_axis = True, None
 
-    def __init__(self, axis, axis2):
+    def __init__(self, axis: Iterable[float], axis2: Iterable[float]) -> None:
         self.axis, self.axis2 = tuple(axis), tuple(axis2)
 
     @classmethod
-    def read(cls, r, prefix):
+    def read(cls, r: ParameterReader, prefix: str) -> 'Universal':
         axis = unit_axis(r, prefix + 'axis', (0.0, 0.0, 1.0))
         axis2 = unit_axis(r, prefix + 'axis2', None)
         if abs(sum(a * b for a, b in zip(axis, axis2))) > AXES_PERPENDICULAR:
@@ -526,7 +537,8 @@ class Universal(ClosureKind):
                 f'{list(axis2)}')
         return cls(axis, axis2)
 
-    def enter_tree(self, model, spec, link, other):
+    def enter_tree(self, model: KinematicModel, spec: JointSpec, link: int,
+                   other: int) -> tuple[list[TreeEdge], list[LoopJoint]]:
         cross = model.virtual_link(f'{spec.name}.cross')
         first, second = model.hidden(spec)
         outer = kin.JointSpec(spec.name, Revolute(self.axis), spec.parent, cross,
@@ -541,18 +553,21 @@ class Universal(ClosureKind):
             link = ahead
         return edges, []
 
-    def residual(self, st, lp, frames, target, r_p, r_c):
+    def residual(self, st: LoopState, lp: LoopJoint, frames: Frames, target: Vec3, r_p: Rotation,
+                 r_c: Rotation) -> None:
         st.a = kin.vector_to_base(frames, lp.parent, lp.axis_p)
         st.b = kin.vector_to_base(frames, lp.child, lp.axis_c)
         st.residual = sp.sub(st.x, target) + (sp.dot(st.a, st.b), 0.0, 0.0)
         st.cosine = 1.0
 
-    def closure_columns(self, lp, st, frames, columns, row):
+    def closure_columns(self, lp: LoopJoint, st: LoopState, frames: Frames, columns: LaneMatrix,
+                        row: int) -> None:
         normal = sp.cross(st.b, st.a)
         for col, w, sign in _position_columns(lp, st, frames, columns, row):
             col[row + 3] = sp.dot(w, normal) * sign
 
-    def bias_rows(self, lp, st, twists, acc, v, w):
+    def bias_rows(self, lp: LoopJoint, st: LoopState, twists: Twists, acc: Twist, v: Vec3,
+                  w: Vec3) -> tuple[Lane, ...]:
         v, w_c, w_p, w_rel = _point_bias(lp, st, twists, v)
         normal = sp.cross(st.b, st.a)
         normal_rate = sp.add(sp.cross(sp.cross(w_c, st.b), st.a),

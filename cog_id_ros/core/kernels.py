@@ -32,7 +32,7 @@ import functools
 import hashlib
 import logging
 import os
-from typing import NamedTuple
+from typing import TYPE_CHECKING, Any, Callable, NamedTuple, Sequence
 import weakref
 
 import numpy as np
@@ -47,6 +47,17 @@ from .joint_motion import projection_increment, velocity_basis
 from .lanes import columns, flat
 from .pipeline import inverse_dynamics
 from .straight_line import Graph, SymOps
+from .value_types import FloatArray, Lane, Ops
+
+if TYPE_CHECKING:
+    from .mechanism import Mechanism
+
+#: a record's fields and their shapes (:func:`layouts`)
+Layout = list[tuple[str, tuple[int, ...]]]
+#: a traced kernel: (name, [(parameter, its Syms)], record type, [(field, its Syms)])
+Traced = tuple[str, list[tuple[str, Any]], type, list[tuple[str, Any]]]
+#: a record's field of lanes: a list or tuple of them, or an (N, k) array for N samples
+Lanes = Sequence[Any]
 
 #: InverseDynamics(backend=...) choices, the fastest first after 'auto'
 BACKENDS = ('auto', 'native', 'python', 'reference')
@@ -59,9 +70,9 @@ TRACE_BUDGET = 2500
 
 class ClosureRecord(NamedTuple):
     """The loop equations at a pose q, and the three numbers Newton's method decides by."""
-    residual: tuple     # Phi(q): 6 equations per constraint (closure.py)
-    cosines: tuple      # per constraint, cosine of its frames' angle (> 0: not a half-turn)
-    increment: tuple    # A_f^+ Phi, the Newton increment of the free joints (q_f -= increment)
+    residual: Lanes     # Phi(q): 6 equations per constraint (closure.py)
+    cosines: Lanes      # per constraint, cosine of its frames' angle (> 0: not a half-turn)
+    increment: Lanes    # A_f^+ Phi, the Newton increment of the free joints (q_f -= increment)
     worst: float        # max |residual| (NaN if any is NaN)
     least_cosine: float  # min of the cosines and 1.0
     largest_step: float  # max |increment|
@@ -69,36 +80,36 @@ class ClosureRecord(NamedTuple):
 
 class PredictionRecord(NamedTuple):
     """The continuation's first-order predictor (continuation.prediction)."""
-    predicted: tuple    # q + V dz, the primary actuators at the goal
-    moved: tuple        # V dz: how far it moves every joint
+    predicted: Lanes    # q + V dz, the primary actuators at the goal
+    moved: Lanes        # V dz: how far it moves every joint
 
 
 class PoseRecord(NamedTuple):
     """Everything the solver needs at a pose q (the ClosureRecord fields first)."""
-    residual: tuple
-    cosines: tuple
-    increment: tuple
+    residual: Lanes
+    cosines: Lanes
+    increment: Lanes
     worst: float
     least_cosine: float
     largest_step: float
     condition: float    # Frobenius condition number of the free columns of A
-    torques: tuple      # tau_m of eq. (7), active_joints order
-    basis: tuple        # rows of the velocity basis V of the free joints (dof each)
-    projection: tuple   # redundant actuation: projection increment dz to the target; else ()
+    torques: Lanes      # tau_m of eq. (7), active_joints order
+    basis: Lanes        # rows of the velocity basis V of the free joints (dof each)
+    projection: Lanes   # redundant actuation: projection increment dz to the target; else ()
 
 
 class ForwardRecord(NamedTuple):
     """A PoseRecord with the accelerations of forward dynamics in place of the torques."""
-    residual: tuple
-    cosines: tuple
-    increment: tuple
+    residual: Lanes
+    cosines: Lanes
+    increment: Lanes
     worst: float
     least_cosine: float
     largest_step: float
     condition: float
-    accelerations: tuple  # thetaddot the efforts produce, active_joints order
-    basis: tuple
-    projection: tuple
+    accelerations: Lanes  # thetaddot the efforts produce, active_joints order
+    basis: Lanes
+    projection: Lanes
     inertia_condition: float  # of the inertia in the independent coordinates (forward_dynamics.py)
 
 
@@ -107,7 +118,8 @@ RECORDS = {'prediction': PredictionRecord, 'closure': ClosureRecord, 'dynamics':
            'forward': ForwardRecord}
 
 
-def closure_record(mechanism, q, ops):
+def closure_record(mechanism: 'Mechanism', q: Sequence[Lane],
+                   ops: Ops) -> tuple[closure.ClosureSolution, ClosureRecord]:
     """(pose, ClosureRecord) at q by the lane code."""
     pose = closure.evaluate(mechanism.model, q, mechanism.free_joints, ops)
     residual = [r for st in pose.loops for r in st.residual]
@@ -117,7 +129,9 @@ def closure_record(mechanism, q, ops):
                                ops.least(cosines), ops.maxabs(increment))
 
 
-def pose_record(mechanism, q, target, qd, qdd, ops):
+def pose_record(mechanism: 'Mechanism', q: Sequence[Lane], target: Sequence[Lane],
+                qd: Sequence[Lane],
+                qdd: Sequence[Lane], ops: Ops) -> PoseRecord:
     """PoseRecord at q by the lane code (the definition both backends compute)."""
     pose, closed = closure_record(mechanism, q, ops)
     basis = velocity_basis(mechanism, pose)
@@ -128,7 +142,8 @@ def pose_record(mechanism, q, target, qd, qdd, ops):
                       [basis[j] for j in mechanism.free_joints], projection)
 
 
-def forward_record(mechanism, q, target, qd, tau, ops):
+def forward_record(mechanism: 'Mechanism', q: Sequence[Lane], target: Sequence[Lane],
+                   qd: Sequence[Lane], tau: Sequence[Lane], ops: Ops) -> ForwardRecord:
     """ForwardRecord at q by the lane code: the pose of :func:`pose_record`, and the
     accelerations the efforts ``tau`` produce at the rates ``qd`` there."""
     pose, closed = closure_record(mechanism, q, ops)
@@ -141,13 +156,14 @@ def forward_record(mechanism, q, target, qd, tau, ops):
                          inertia_condition)
 
 
-def prediction_record(mechanism, q, basis, goal):
+def prediction_record(mechanism: 'Mechanism', q: Sequence[Lane], basis: Any,
+                      goal: Sequence[Lane]) -> PredictionRecord:
     """PredictionRecord from the pose q with velocity basis V (list over joints) to the
     goal of the actuators."""
     return PredictionRecord(*prediction(mechanism, (q, basis), goal))
 
 
-def layouts(mechanism):
+def layouts(mechanism: 'Mechanism') -> dict[str, Layout]:
     """Per kernel, its record's fields and their shapes: () a number, (k,) k numbers,
     (rows, k) rows of k numbers. The order of the flat outputs of the *_many kernels."""
     m = mechanism
@@ -165,15 +181,16 @@ def layouts(mechanism):
             'forward': closing + forward}
 
 
-def width(layout):
+def width(layout: Layout) -> int:
     """Numbers in a record of ``layout`` (a field of shape () holds one)."""
     return sum(int(np.prod(shape)) for _, shape in layout)
 
 
-def unpack(flat, layout, record):
+def unpack(flat: FloatArray, layout: Layout, record: Callable[..., Any]) -> Any:
     """The record of N samples from their flat outputs (N, outputs): each field an array of
     shape (N,) + its shape (views, no copies)."""
-    fields, offset = [], 0
+    fields: list[FloatArray] = []
+    offset = 0
     for _, shape in layout:
         size = int(np.prod(shape))
         block = flat[:, offset:offset + size]
@@ -188,125 +205,197 @@ class ReferenceKernels:
     order of :func:`layouts`)."""
     name = 'reference'
 
-    def __init__(self, mechanism):
-        self._mechanism = weakref.ref(mechanism)
+    def __init__(self, mechanism: 'Mechanism') -> None:
+        self._mechanism: Callable[[], Any] = weakref.ref(mechanism)
         self.layouts = layouts(mechanism)
 
     @property
-    def mechanism(self):
+    def mechanism(self) -> 'Mechanism':
         """The mechanism the kernels are made for. Held weakly, as by the cache
         (:class:`KernelCache`): kernels are used beside their mechanism (a solver holds
         both), and a mechanism and its kernels go together."""
         return self._mechanism()
 
-    def prediction(self, q, basis, goal):
+    #: one Simulation step in C: compiled kernels only (NativeKernels)
+    rk4_step: Any = None
+
+    def with_forward(self) -> 'ReferenceKernels':
+        """These kernels, with the forward kernel ready (traced or compiled on first use by
+        the backends that make it: a solver that only serves torques never makes it)."""
+        return self
+
+    def prediction(self, q: Sequence[float], basis: Any,
+                   goal: Sequence[float]) -> PredictionRecord:
         return prediction_record(self.mechanism, q, basis, goal)
 
-    def closure(self, q):
+    def closure(self, q: Sequence[float]) -> ClosureRecord:
         return closure_record(self.mechanism, q, sp.ScalarOps)[1]
 
-    def dynamics(self, q, target, qd, qdd):
+    def dynamics(self, q: Sequence[float], target: Sequence[float], qd: Sequence[float],
+                 qdd: Sequence[float]) -> PoseRecord:
         return pose_record(self.mechanism, q, target, qd, qdd, sp.ScalarOps)
 
-    def forward(self, q, target, qd, tau):
+    def forward(self, q: Sequence[float], target: Sequence[float], qd: Sequence[float],
+                tau: Sequence[float]) -> ForwardRecord:
         return forward_record(self.mechanism, q, target, qd, tau, sp.ScalarOps)
 
-    def closure_many(self, q):
+    def closure_many(self, q: FloatArray) -> FloatArray:
         return flat(closure_record(self.mechanism, columns(q), sp.ArrayOps)[1], len(q))
 
-    def dynamics_many(self, q, target, qd, qdd):
-        return flat(pose_record(self.mechanism, *map(columns, (q, target, qd, qdd)),
-                                sp.ArrayOps), len(q))
+    def dynamics_many(self, q: FloatArray, target: FloatArray, qd: FloatArray,
+                      qdd: FloatArray) -> FloatArray:
+        return flat(pose_record(self.mechanism, columns(q), columns(target), columns(qd),
+                                columns(qdd), sp.ArrayOps), len(q))
 
-    def forward_many(self, q, target, qd, tau):
-        return flat(forward_record(self.mechanism, *map(columns, (q, target, qd, tau)),
-                                   sp.ArrayOps), len(q))
+    def forward_many(self, q: FloatArray, target: FloatArray, qd: FloatArray,
+                     tau: FloatArray) -> FloatArray:
+        return flat(forward_record(self.mechanism, columns(q), columns(target), columns(qd),
+                                   columns(tau), sp.ArrayOps), len(q))
 
 
-def trace(mechanism):
-    """The four kernels run once on symbolic lanes: [(name, params, record type, fields)], what
-    the emitters (emitter.py) write as code."""
+#: the kernels every solver loads (the torques), and those made on first use by forward
+#: dynamics and the simulator (a second library: a solver that only serves torques does not
+#: trace or compile them)
+TORQUE_KERNELS = ('prediction', 'closure', 'dynamics')
+FORWARD_KERNELS = ('prediction', 'closure', 'forward')
+
+
+def trace(mechanism: 'Mechanism', kinds: Sequence[str] = TORQUE_KERNELS) -> list[Traced]:
+    """The kernels ``kinds`` run once on symbolic lanes: [(name, params, record type,
+    fields)], what the emitters (emitter.py) write as code."""
     m = mechanism
     graph = Graph()
     q = graph.inputs('q', m.n_coordinates)
+    effort = 'tau' if 'forward' in kinds else 'qdd'      # dynamics' qdd, forward's tau
     target, qd, qdd = (graph.inputs(name, len(m.active_joints))
-                       for name in ('target', 'qd', 'qdd'))
-    tau = graph.inputs('tau', len(m.active_joints))
+                       for name in ('target', 'qd', effort))
     flat = graph.inputs('basis', m.n_coordinates * m.dof)
     basis = [flat[j * m.dof:(j + 1) * m.dof] for j in range(m.n_coordinates)]
-    predicted = prediction_record(m, q, basis, target)
-    _, closed = closure_record(m, q, SymOps)
-    whole = pose_record(m, q, target, qd, qdd, SymOps)
-    forward = forward_record(m, q, target, qd, tau, SymOps)
-    return [('prediction', [('q', q), ('basis', basis), ('goal', target)], PredictionRecord,
-             list(zip(PredictionRecord._fields, predicted))),
-            ('closure', [('q', q)], ClosureRecord, list(zip(ClosureRecord._fields, closed))),
-            ('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)], PoseRecord,
-             list(zip(PoseRecord._fields, whole))),
-            ('forward', [('q', q), ('target', target), ('qd', qd), ('tau', tau)], ForwardRecord,
-             list(zip(ForwardRecord._fields, forward)))]
+    out: list[Any] = []
+    for kind in kinds:
+        if kind == 'prediction':
+            out.append(('prediction', [('q', q), ('basis', basis), ('goal', target)],
+                        PredictionRecord, list(zip(PredictionRecord._fields,
+                                                   prediction_record(m, q, basis, target)))))
+        elif kind == 'closure':
+            out.append(('closure', [('q', q)], ClosureRecord,
+                        list(zip(ClosureRecord._fields, closure_record(m, q, SymOps)[1]))))
+        elif kind == 'dynamics':
+            out.append(('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)],
+                        PoseRecord, list(zip(PoseRecord._fields,
+                                             pose_record(m, q, target, qd, qdd, SymOps)))))
+        else:
+            out.append(('forward', [('q', q), ('target', target), ('qd', qd), ('tau', qdd)],
+                        ForwardRecord, list(zip(ForwardRecord._fields,
+                                                forward_record(m, q, target, qd, qdd,
+                                                               SymOps)))))
+    return out
 
 
 class PythonKernels(ReferenceKernels):
     """The kernels traced into straight-line Python functions (``source`` keeps their text,
-    ``operations`` their sizes); N samples run the lane code on arrays (reference)."""
+    ``operations`` their sizes); N samples run the lane code on arrays (reference). The
+    forward kernel is traced when first used."""
     name = 'python'
 
-    def __init__(self, mechanism, traced=None):
+    def __init__(self, mechanism: 'Mechanism', traced: Sequence[Traced] | None = None) -> None:
         super().__init__(mechanism)
-        self.source, self.operations = {}, {}
-        for name, params, record, fields in traced or trace(mechanism):
+        self.source: dict[str, str] = {}
+        self.operations: dict[str, int] = {}
+        self._add(trace(mechanism) if traced is None else traced)
+
+    def _add(self, traced: Sequence[Traced]) -> None:
+        for name, params, record, fields in traced:
             function, self.source[name], self.operations[name] = python_function(
                 name, params, record, fields)
             setattr(self, name, function)
+
+    def with_forward(self) -> 'PythonKernels':
+        if 'forward' not in self.source:        # traced on first use
+            self._add(trace(self.mechanism, ('forward',)))
+        return self
 
 
 class NativeKernels(ReferenceKernels):
     """The kernels compiled from C (native.py): a library per mechanism, cached on disk by a
     hash of what the kernels are made of (:func:`kernel_key`), so a cached mechanism loads
-    without tracing. N samples run the same C in a loop. Raises
-    native.NativeUnavailable when they cannot be had."""
+    without tracing. N samples run the same C in a loop. Forward dynamics and the simulator
+    step (``forward``, ``rk4_step``) are a second library of the mechanism, loaded (or
+    built) when first used. Raises native.NativeUnavailable when they cannot be had."""
     name = 'native'
 
-    def __init__(self, mechanism):
+    def __init__(self, mechanism: 'Mechanism') -> None:
         super().__init__(mechanism)
         module, self.operations = native.load_module(kernel_key(mechanism), self._source)
-        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord, ForwardRecord)
-        self.prediction = module.prediction
-        self.closure, self.dynamics = module.closure, module.dynamics
-        self.forward = module.forward
-        #: one Simulation step in C (native_simulation.py)
-        self.rk4_step = module.rk4_step
+        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
+        # the compiled functions stand in for the lane code's methods
+        self.prediction = module.prediction                                 # type: ignore[method-assign]
+        self.closure, self.dynamics = module.closure, module.dynamics     # type: ignore[method-assign]
         self.module = module
+        self.modules: dict[str, Any] = dict.fromkeys(TORQUE_KERNELS, module)
         self.widths = {name: width(layout) for name, layout in self.layouts.items()}
 
-    def closure_many(self, q):
+    def with_forward(self) -> 'NativeKernels':
+        """``forward`` and ``rk4_step`` (one Simulation step in C, native_simulation.py) from
+        the second library, loaded (or built) on first use. Where it cannot be had, the
+        forward kernel is traced into Python (one log line says why), without rk4_step."""
+        if 'forward' in self.modules:
+            return self
+        m = self.mechanism
+        try:
+            module, operations = native.load_module(kernel_key(m) + ':forward',
+                                                    self._forward_source)
+        except native.NativeUnavailable as exc:
+            KERNELS.say_fallback(exc)
+            self.forward = PythonKernels(m, []).with_forward().forward  # type: ignore[method-assign]
+            self.modules['forward'] = None
+            return self
+        module.set_record_types(PredictionRecord, ClosureRecord, ForwardRecord)
+        self.operations['forward'] = operations['forward']
+        self.forward = module.forward  # type: ignore[method-assign]
+        self.rk4_step = module.rk4_step
+        self.modules['forward'] = module
+        return self
+
+    def closure_many(self, q: FloatArray) -> FloatArray:
         return self._many('closure', q)
 
-    def dynamics_many(self, q, target, qd, qdd):
+    def dynamics_many(self, q: FloatArray, target: FloatArray, qd: FloatArray,
+                      qdd: FloatArray) -> FloatArray:
         return self._many('dynamics', q, target, qd, qdd)
 
-    def forward_many(self, q, target, qd, tau):
+    def forward_many(self, q: FloatArray, target: FloatArray, qd: FloatArray,
+                     tau: FloatArray) -> FloatArray:
+        if self.with_forward().modules['forward'] is None:
+            return super().forward_many(q, target, qd, tau)
         return self._many('forward', q, target, qd, tau)
 
-    def _many(self, name, *arrays):
-        arrays = [np.ascontiguousarray(a, dtype=float) for a in arrays]
-        out = np.empty((len(arrays[0]), self.widths[name]))
-        getattr(self.module, name + '_many')(*arrays, out)
+    def _many(self, name: str, *arrays: FloatArray) -> FloatArray:
+        contiguous = [np.ascontiguousarray(a, dtype=float) for a in arrays]
+        out = np.empty((len(contiguous[0]), self.widths[name]))
+        getattr(self.modules[name], name + '_many')(*contiguous, out)
         return out
 
-    def _source(self, module):
+    def _source(self, module: str) -> tuple[str, dict[str, int]]:
         """(C source of the module, operations per kernel): traced here, only when the
         library must be built, and not kept (a large mechanism's trace is tens of MB)."""
+        return c_module_source(module, [(name, params, record.__name__, fields)
+                                        for name, params, record, fields in
+                                        trace(self.mechanism)])
+
+    def _forward_source(self, module: str) -> tuple[str, dict[str, int]]:
+        """The same for the second library: the forward kernel, the two it is closed with,
+        and the Simulation step (native_simulation.py)."""
         m = self.mechanism
         return c_module_source(module, [(name, params, record.__name__, fields)
-                                        for name, params, record, fields in trace(m)],
+                                        for name, params, record, fields in
+                                        trace(m, FORWARD_KERNELS)],
                                native_simulation.simulation_source(m, self.layouts),
                                [(name, 'sim_' + name, doc)
                                 for name, doc in native_simulation.METHODS])
 
 
-def kernel_key(mechanism):
+def kernel_key(mechanism: 'Mechanism') -> str:
     """Everything a mechanism's kernels are made of, as text: the model as read (joints,
     inertias, gravity, actuators, weights; the same whatever types the parameters came in,
     e.g. rclpy's arrays, and whatever the initial positions) and the core's source."""
@@ -317,7 +406,7 @@ def kernel_key(mechanism):
 
 
 @functools.cache
-def core_version():
+def core_version() -> str:
     """A hash of the core's source files (its Python and the C of the kernels' prelude):
     what the kernels are made of."""
     digest = hashlib.sha256()
@@ -336,12 +425,15 @@ class KernelCache:
     do its kernels; the frozen Mechanism holds nothing of them). Also what this process has
     said once: that compiled kernels are unavailable."""
 
-    def __init__(self):
-        self._made = weakref.WeakKeyDictionary()     # mechanism -> {backend: kernels}
+    def __init__(self) -> None:
+        # mechanism -> {backend: kernels}
+        self._made: 'weakref.WeakKeyDictionary[Mechanism, dict[str, ReferenceKernels]]' = \
+            weakref.WeakKeyDictionary()
         #: the fallback to the Python kernels has been logged (it is said once per process)
         self.fallback_said = False
 
-    def kernels(self, mechanism, backend, make):
+    def kernels(self, mechanism: 'Mechanism', backend: str,
+                make: Callable[['Mechanism'], ReferenceKernels]) -> ReferenceKernels:
         """The ``backend`` kernels of ``mechanism``: ``make(mechanism)`` the first time."""
         made = self._made.setdefault(mechanism, {})
         kernels = made.get(backend)
@@ -349,7 +441,7 @@ class KernelCache:
             kernels = made[backend] = make(mechanism)
         return kernels
 
-    def say_fallback(self, why):
+    def say_fallback(self, why: object) -> None:
         """Log, once per process, that the Python kernels serve where compiled ones were
         wanted and ``why``."""
         if not self.fallback_said:
@@ -363,7 +455,7 @@ KERNELS = KernelCache()
 _log = logging.getLogger('cog_id_ros')
 
 
-def kernels_for(mechanism, backend='auto'):
+def kernels_for(mechanism: 'Mechanism', backend: str = 'auto') -> ReferenceKernels:
     """The kernels of ``backend`` for a mechanism (traced and compiled kernels are made once
     and shared by every solver of the mechanism: :data:`KERNELS`).
 

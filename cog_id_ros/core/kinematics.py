@@ -18,11 +18,13 @@ ones; a velocity basis, a Newton increment or a step limit has one entry per coo
 """
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from . import spatial as sp
 from .errors import MechanismConfigError
+from .value_types import Lane, Ops, Rotation, Transform, Twist, Vec3
 
 BASE = -1
 ZERO3 = (0.0, 0.0, 0.0)
@@ -34,7 +36,7 @@ class JointSpec:
     the axis) between links ``parent`` and ``child`` (BASE: the base link), and its
     attachment frames on them (xyz, roll-pitch-yaw)."""
     name: str
-    kind: object
+    kind: Any
     parent: int
     child: int
     parent_xyz: tuple
@@ -55,10 +57,10 @@ class TreeEdge:
     its kind's hidden ones); ``axis_p`` and ``origin_p`` its axis and a point of it in the
     tree-parent link frame.
     """
-    joint: 'int | None'
+    joint: Any           # int; None for a joint without a coordinate of its own
     parent: int
     child: int
-    kind: object
+    kind: Any
     name: str            # the declared joint it comes from
     sign: float = 1.0
     r0: tuple = sp.IDENTITY
@@ -71,7 +73,7 @@ class TreeEdge:
     origin_p: tuple = ZERO3
     coords: tuple = ()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not self.coords and self.joint is not None:
             self.coords = (self.joint,)
 
@@ -82,10 +84,10 @@ class LoopJoint:
     parent and child links (``joint`` its coordinate, None for a joint without one), or a
     constraint a joint in the tree adds (a spherical joint's unit quaternion). ``kind``
     (joints.py) writes its rows."""
-    joint: 'int | None'
+    joint: Any           # int; None for a joint without a coordinate of its own
     parent: int
     child: int
-    kind: object
+    kind: Any
     name: str
     d0: tuple = sp.IDENTITY  # R_pj, R_pj K, R_pj K^2: the parent attachment rotation after
     d1: tuple = sp.IDENTITY  # a rotation q about the axis is d0 + sin(q) d1 + (1 - cos q) d2
@@ -101,7 +103,8 @@ class LoopJoint:
 class KinematicModel:
     """The spanning tree and the loop-closing joints of a mechanism, ready to evaluate."""
 
-    def __init__(self, link_names, joints, closures=()):
+    def __init__(self, link_names: Iterable[str], joints: Iterable[JointSpec],
+                 closures: Iterable[JointSpec] = ()) -> None:
         self.link_names = list(link_names)
         self.joints = list(joints)            # joints with a coordinate
         self.closures = list(closures)        # spherical, universal, fixed
@@ -113,27 +116,29 @@ class KinematicModel:
         self.coordinate_names = [spec.name for spec in self.joints]
         self.coordinate_joints = [spec.name for spec in self.joints]
         #: the hidden coordinates' values where their attachment frames coincide
-        self.hidden_start = []
+        self.hidden_start: list[float] = []
         #: tree edges, loop-closing joints, and the constraints joints in the tree add
-        self.edges, self.loops, self.units = [], [], []
-        self.edge_of_link = [None] * self.n_links
+        self.edges: list[TreeEdge] = []
+        self.loops: list[LoopJoint] = []
+        self.units: list[LoopJoint] = []
+        self.edge_of_link: list[Any] = [None] * self.n_links   # int: a reached link's edge
         self._build_tree()
         self.n_coordinates = len(self.coordinate_kinds)
         #: every constraint of the closure equations: the loops, then a unit quaternion each
         self.constraints = self.loops + self.units
         #: per coordinate, the indices of the constraints whose equations it enters
-        self.loops_of_joint = [[] for _ in range(self.n_coordinates)]
+        self.loops_of_joint: list[list[int]] = [[] for _ in range(self.n_coordinates)]
         for li, lp in enumerate(self.constraints):
             for j in loop_columns(lp):
                 self.loops_of_joint[j].append(li)
-        self._orders = {}
+        self._orders: dict[tuple[int, ...], list[int]] = {}
 
     @property
-    def coordinate_types(self):
+    def coordinate_types(self) -> list[str]:
         """Per coordinate: 'revolute', 'prismatic', 'quaternion' (its kind's word)."""
         return [kind.coordinate_type for kind in self.coordinate_kinds]
 
-    def hidden(self, spec):
+    def hidden(self, spec: JointSpec) -> tuple[int, ...]:
         """New hidden coordinates of ``spec``, one per part its kind names; their indices."""
         kind = spec.kind
         first = len(self.coordinate_kinds)
@@ -144,14 +149,14 @@ class KinematicModel:
             self.hidden_start.append(value)
         return tuple(range(first, first + len(kind.hidden)))
 
-    def virtual_link(self, name):
+    def virtual_link(self, name: str) -> int:
         """A new massless link of the tree (not a link of the mechanism); its index."""
         self.link_names.append(name)
         self.edge_of_link.append(None)
         self.n_links += 1
         return self.n_links - 1
 
-    def _build_tree(self):
+    def _build_tree(self) -> None:
         """Breadth-first from the base over the joints incident to each link, in the listed
         order; then each loop-closing joint's cycle from the tree paths of its two links.
 
@@ -159,17 +164,17 @@ class KinematicModel:
         keeps only its tree edge (no copied paths), and a cycle is found by walking up from
         both links to their nearest common ancestor.
         """
-        incident = {}
+        incident: dict[int, list[int]] = {}
         for j, spec in enumerate(self.joints):
             incident.setdefault(spec.parent, []).append(j)
             incident.setdefault(spec.child, []).append(j)
         in_tree = [False] * self.n_joints
         closure_in_tree = [False] * len(self.closures)
-        up = {BASE: None}       # link -> (tree edge, tree parent link)
+        up: dict[int, Any] = {BASE: None}       # link -> (tree edge, tree parent link)
         depth = {BASE: 0}
         queue = deque([BASE])
 
-        def grow(edge, link, other):
+        def grow(edge: TreeEdge, link: int, other: int) -> None:
             self.edge_of_link[other] = len(self.edges)
             up[other] = (len(self.edges), link)
             depth[other] = depth[link] + 1
@@ -203,11 +208,12 @@ class KinematicModel:
             raise MechanismConfigError(
                 'mechanism.links',
                 f"link '{missing[0]}' is not connected to the base link by any chain of joints")
-        closing = [(j, spec) for j, spec in enumerate(self.joints) if not in_tree[j]]
+        closing: list[tuple[int | None, JointSpec]] = [
+            (j, spec) for j, spec in enumerate(self.joints) if not in_tree[j]]
         closing += [(None, spec) for k, spec in enumerate(self.closures)
                     if not closure_in_tree[k]]
-        for j, spec in closing:
-            loop = _loop_joint(j, spec)
+        for joint, spec in closing:
+            loop = _loop_joint(joint, spec)
             on_child, on_parent = _paths_below_common_ancestor(up, depth, spec.child,
                                                                spec.parent)
             loop.cycle = self._cycle(on_child, 1.0) + self._cycle(on_parent, -1.0)
@@ -215,7 +221,7 @@ class KinematicModel:
         self.tree_joints = [e.joint for e in self.edges if e.joint is not None]
         self.loop_joints = [lp.joint for lp in self.loops if lp.joint is not None]
 
-    def start(self, positions):
+    def start(self, positions: Iterable[float]) -> list[float]:
         """Every coordinate at the start of assembly: ``positions`` (one per joint), the
         hidden ones at their kinds' ``hidden_start`` (their attachment frames coincide),
         then as each tree edge's kind sets them (``kind.start``: a spherical joint turned
@@ -225,7 +231,8 @@ class KinematicModel:
             e.kind.start(self, e, q)
         return q
 
-    def fitted_rotation(self, link, own, centre, frames, skip):
+    def fitted_rotation(self, link: int, own: Vec3, centre: Vec3, frames: 'Frames',
+                        skip: str | None) -> Rotation | None:
         """The rotation of tree link ``link`` about its point ``own`` (at ``centre`` in the
         base frame) that best carries the centres of its joints but ``skip`` (those whose
         two attachment origins coincide: ``kind.origins_coincide``) to their partners'
@@ -254,7 +261,7 @@ class KinematicModel:
         rotation = right.T @ np.diag([1.0, 1.0, d]) @ left.T
         return tuple(float(x) for x in rotation.ravel())
 
-    def _outside(self, link):
+    def _outside(self, link: int) -> set[int]:
         """The links (and the base) not in the subtree of ``link``."""
         out = {BASE}
         for k in range(self.n_links):
@@ -266,11 +273,12 @@ class KinematicModel:
                 out.add(k)
         return out
 
-    def _cycle(self, path, sign):
+    def _cycle(self, path: Sequence[int], sign: float) -> list[tuple[int, float]]:
         """(coordinate, sign) of every coordinate of the tree edges on ``path``."""
         return [(c, sign) for e in path for c in self.edges[e].coords]
 
-    def _tree_closure(self, spec, up, grow):
+    def _tree_closure(self, spec: JointSpec, up: Mapping[int, Any],
+                      grow: Callable[[TreeEdge, int, int], None]) -> int:
         """Put a joint without a coordinate of its own into the tree (from its end that is
         already reached to the other), as its kind says; returns the link it reaches."""
         link, other = (spec.parent, spec.child) if spec.parent in up else \
@@ -281,7 +289,7 @@ class KinematicModel:
         self.units.extend(constraints)
         return other
 
-    def elimination_order(self, columns):
+    def elimination_order(self, columns: Sequence[int]) -> list[int]:
         """Positions into ``columns`` (joint indices) in the order the closure's least squares
         factorises them: joints of fewer loops first, grouped by loop. A leg of a parallel
         robot enters only its own loop and comes first; the joints shared by every loop (the
@@ -296,10 +304,12 @@ class KinematicModel:
         return order
 
 
-def _paths_below_common_ancestor(up, depth, a, b):
+def _paths_below_common_ancestor(up: Mapping[int, Any], depth: Mapping[int, int], a: int,
+                                 b: int) -> tuple[list[int], list[int]]:
     """Tree joints from the nearest common ancestor of links a and b down to a, and down to
     b (each in order from the ancestor outwards, as the tree paths from the base list them)."""
-    path_a, path_b = [], []
+    path_a: list[int] = []
+    path_b: list[int] = []
     while depth[a] > depth[b]:
         j, a = up[a]
         path_a.append(j)
@@ -316,7 +326,7 @@ def _paths_below_common_ancestor(up, depth, a, b):
     return path_a, path_b
 
 
-def attachment(spec, side):
+def attachment(spec: JointSpec, side: str) -> Transform:
     """(rotation, translation) of a joint's attachment frame on ``side`` ('parent' or
     'child') in that link's frame."""
     if side == 'parent':
@@ -324,7 +334,7 @@ def attachment(spec, side):
     return sp.rpy_matrix(spec.child_rpy), tuple(spec.child_xyz)
 
 
-def _loop_joint(j, spec):
+def _loop_joint(j: int | None, spec: JointSpec) -> LoopJoint:
     r_pj, r_cj = sp.rpy_matrix(spec.parent_rpy), sp.rpy_matrix(spec.child_rpy)
     axis, axis2 = spec.kind.axis, spec.kind.axis2
     k = sp.skew(axis)
@@ -335,7 +345,7 @@ def _loop_joint(j, spec):
                      axis_c=sp.mat_vec(r_cj, axis2) if axis2 else ())
 
 
-def loop_columns(loop):
+def loop_columns(loop: LoopJoint) -> list[int]:
     """The joint coordinates a loop's closure equations depend on: its cycle through the
     tree, and its own coordinate if it has one."""
     return [j for j, _ in loop.cycle] + ([] if loop.joint is None else [loop.joint])
@@ -350,16 +360,20 @@ class Frames:
     declared child w.r.t. declared parent for loop-closing joints.
     """
     __slots__ = ('rot', 'pos', 'xi')
+    # filled by forward_kinematics: None until each kind places its link or joint
+    rot: list[Any]
+    pos: list[Any]
+    xi: list[Any]
 
 
-def frame_of(frames, link):
+def frame_of(frames: Frames, link: int) -> tuple[Any, Any]:
     """(rotation, origin) of a link; the base is the identity."""
     if link == BASE:
         return None, None
     return frames.rot[link], frames.pos[link]
 
 
-def to_base(frames, link, r_local, t_local):
+def to_base(frames: Frames, link: int, r_local: Rotation, t_local: Vec3) -> Transform:
     """Pose of a frame fixed to ``link`` (given in the link frame) in the base frame."""
     rot, pos = frame_of(frames, link)
     if rot is None:
@@ -367,19 +381,19 @@ def to_base(frames, link, r_local, t_local):
     return sp.mat_mat(rot, r_local), sp.add(pos, sp.mat_vec(rot, t_local))
 
 
-def point_to_base(frames, link, point):
+def point_to_base(frames: Frames, link: int, point: Vec3) -> Vec3:
     rot, pos = frame_of(frames, link)
     if rot is None:
         return point
     return sp.add(pos, sp.mat_vec(rot, point))
 
 
-def vector_to_base(frames, link, vector):
+def vector_to_base(frames: Frames, link: int, vector: Vec3) -> Vec3:
     rot, _ = frame_of(frames, link)
     return vector if rot is None else sp.mat_vec(rot, vector)
 
 
-def forward_kinematics(model, q, ops):
+def forward_kinematics(model: KinematicModel, q: Sequence[Lane], ops: Ops) -> Frames:
     """Link poses and joint twists for joint coordinates q (list of lanes, joints order):
     each tree edge's kind places its child and gives its coordinates' twists, then each
     loop-closing joint's kind the twist of its own coordinate."""
@@ -394,23 +408,24 @@ def forward_kinematics(model, q, ops):
     return frames
 
 
-def link_twists(model, frames, qdot):
+def link_twists(model: KinematicModel, frames: Frames, qdot: Sequence[Lane]) -> list[Twist]:
     """Twist of every link for joint rates qdot (eq. 2 before projection onto the links' COGs)."""
-    twists = [None] * model.n_links
+    twists: list[Any] = [None] * model.n_links
     for e in model.edges:
         twists[e.child] = e.kind.child_twist(
             e, frames, None if e.parent == BASE else twists[e.parent], qdot)
     return twists
 
 
-def twist_of(twists, link):
+def twist_of(twists: Sequence[Twist], link: int) -> Twist:
     return sp.ZERO_TWIST if link == BASE else twists[link]
 
 
-def link_bias_accelerations(model, frames, twists, qdot):
+def link_bias_accelerations(model: KinematicModel, frames: Frames, twists: Sequence[Twist],
+                            qdot: Sequence[Lane]) -> list[Twist]:
     """Spatial acceleration of every link when all joint accelerations are zero (each
     edge's kind adds its joint's bias to its parent's; ``xi qddot`` is added separately)."""
-    acc = [None] * model.n_links
+    acc: list[Any] = [None] * model.n_links
     for e in model.edges:
         acc[e.child] = e.kind.child_bias(e, frames, twist_of(twists, e.parent),
                                          twist_of(acc, e.parent), qdot)

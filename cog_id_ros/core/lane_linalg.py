@@ -8,9 +8,12 @@ independent. Loss of column rank is a singular configuration; ``condition_number
 how close a configuration is to it.
 """
 from operator import mul
+from typing import Sequence
+
+from .value_types import Lane, Ops
 
 
-def _dot(a, b):
+def _dot(a: Sequence[Lane], b: Sequence[Lane]) -> Lane:
     return sum(map(mul, a, b))
 
 
@@ -26,14 +29,16 @@ class QRLeastSquares:
     (straight_line.py) drops operations on structural zeros.
     """
 
-    def __init__(self, columns, ops, order=None):
+    def __init__(self, columns: Sequence[Sequence[Lane]], ops: Ops,
+                 order: Sequence[int] | None = None) -> None:
         self.ops = ops
         n = self.n = len(columns)
         self.order = None if order is None or list(order) == list(range(n)) else list(order)
         if self.order is not None:
             columns = [columns[i] for i in self.order]
-        q = self.q = []
-        r = [[0.0] * n for _ in range(n)]
+        q: list[list[Lane]] = []
+        self.q = q
+        r: list[list[Lane]] = [[0.0] * n for _ in range(n)]
         for j, col in enumerate(columns):
             v = col
             for _ in range(2):  # CGS2: a second pass makes them orthogonal to working precision
@@ -47,7 +52,7 @@ class QRLeastSquares:
             q.append([vk * inv for vk in v])
         self.r = r
         # R^-1, column by column (upper triangular)
-        rinv = [[0.0] * n for _ in range(n)]
+        rinv: list[list[Lane]] = [[0.0] * n for _ in range(n)]
         diag_inv = [ops.recip(r[i][i]) for i in range(n)]
         for j in range(n):
             rinv[j][j] = diag_inv[j]
@@ -58,18 +63,18 @@ class QRLeastSquares:
                 rinv[i][j] = -s * diag_inv[i]
         self.rinv = rinv
 
-    def solve(self, b):
+    def solve(self, b: Sequence[Lane]) -> list[Lane]:
         """x minimising ||A x - b|| (b: list of lanes, one per row)."""
         y = [_dot(qi, b) for qi in self.q]
         x = [_dot(row[i:], y[i:]) for i, row in enumerate(self.rinv)]
         if self.order is None:
             return x
-        out = [None] * self.n
+        out: list[Lane] = [None] * self.n
         for k, i in enumerate(self.order):
             out[i] = x[k]
         return out
 
-    def condition_number(self):
+    def condition_number(self) -> Lane:
         """Frobenius-norm condition number ||A||_F ||A^+||_F = ||R||_F ||R^-1||_F.
 
         It bounds the 2-norm condition number from above (by at most a factor n) and is
@@ -82,17 +87,18 @@ class QRLeastSquares:
         return self.ops.sqrt(norm_a) * self.ops.sqrt(norm_inv)
 
 
-def solve_spd(a, rhs, ops):
+def solve_spd(a: Sequence[Sequence[Lane]], rhs: Sequence[Sequence[Lane]],
+              ops: Ops) -> list[list[Lane]]:
     """Solve A X = RHS for a small symmetric positive-definite A (list of rows of lanes)
     by Cholesky; RHS is a list of rows (each a list of lanes). Returns X as a list of rows."""
     return cholesky_solve(cholesky(a, ops), rhs, ops)
 
 
-def cholesky(a, ops):
+def cholesky(a: Sequence[Sequence[Lane]], ops: Ops) -> list[list[Lane]]:
     """The lower Cholesky factor L of a small symmetric positive-definite A, A = L L^T
     (list of rows of lanes; a pivot that is not positive gives NaN, as ops.sqrt does)."""
     n = len(a)
-    lower = [[0.0] * n for _ in range(n)]
+    lower: list[list[Lane]] = [[0.0] * n for _ in range(n)]
     for i in range(n):
         for j in range(i + 1):
             s = a[i][j]
@@ -105,13 +111,14 @@ def cholesky(a, ops):
     return lower
 
 
-def cholesky_solve(lower, rhs, ops):
+def cholesky_solve(lower: Sequence[Sequence[Lane]], rhs: Sequence[Sequence[Lane]],
+                   ops: Ops) -> list[list[Lane]]:
     """X with L L^T X = RHS, L from :func:`cholesky`; RHS and X lists of rows of lanes."""
     n = len(lower)
     m = len(rhs[0]) if rhs else 0
-    out = [[0.0] * m for _ in range(n)]
+    out: list[list[Lane]] = [[0.0] * m for _ in range(n)]
     for c in range(m):
-        y = [0.0] * n
+        y: list[Lane] = [0.0] * n
         for i in range(n):
             s = rhs[i][c]
             for k in range(i):

@@ -18,19 +18,22 @@ assembly.py (closing the loops) and degrees_of_freedom.py (freedoms, primary act
 """
 import math
 import re
+from typing import Any, Iterable, Mapping, Sequence, TypeVar
 import warnings
 
 import numpy as np
 
-from . import assembly, closure, degrees_of_freedom, joints, spherical_chains
+from . import assembly, closure, degrees_of_freedom, idle_spins, joints, spherical_chains
 from .assembly import AssemblyWarning
 from .errors import MechanismConfigError
 from .kinematics import BASE, JointSpec, KinematicModel
-from .parameters import ParameterReader
+from .parameters import ParameterReader, split_owner
+from .spherical_chains import SphericalChain
+from .value_types import FloatArray
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
-                  'max_condition_number', 'closure_tolerance')
+                  'max_condition_number', 'closure_tolerance', 'locked_joints', 'idle_spins')
 LINK_KEYS = ('mass', 'com', 'inertia')
 JOINT_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy',
               'axis', 'axis2', 'lower', 'upper', 'effort')
@@ -63,18 +66,23 @@ MAX_LOOPS = 40
 MAX_ACTIVE_JOINTS = 100
 MAX_JACOBIAN_COLUMNS = 5000   # links x active joints
 
-#: names of links and joints become components of ROS 2 parameter names
-#: (``links.<link>.mass``): letters, digits and '_', not starting with a digit
-NAME_PATTERN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*\Z')
+#: what :func:`bounded` checks and hands back
+Values = TypeVar('Values', bound=Sequence[float])
+
+#: what no name of a link or joint may hold: control characters (a line break would split a
+#: log line, a CSV row or a parameter file's key). Anything else is a name, as URDF exporters
+#: write them ('/', a leading digit, '.', spaces, non-ASCII letters): ROS 2 parameter files
+#: hold such keys (``links.<name>.mass``), and outputs carry the names unchanged
+NAME_REFUSED = re.compile(r'[\x00-\x1f\x7f-\x9f]')
 
 
 class Mechanism:
     """Links, joints and actuators of a (closed-link) mechanism; see docs/mechanism.md."""
 
-    def __init__(self, params, _chains=()):
+    def __init__(self, params: Mapping[str, Any], _chains: Iterable[SphericalChain] = ()) -> None:
         reader = ParameterReader(params)
         self.parameters = dict(reader.params)
-        self.assembly_warnings = []
+        self.assembly_warnings: list[str] = []
         #: made by another Mechanism as its solver form: the chains of three revolutes its
         #: spherical joints stand for (spherical_chains.py)
         self.stands_for = list(_chains)
@@ -82,6 +90,7 @@ class Mechanism:
         self._read_links(reader)
         self._read_joints(reader)
         self._read_positions(reader)
+        idle_spins.read_locks(self, reader)
         self._reject_unknown(reader)
         self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs)
         #: the solver's coordinates: the joints (mechanism.joints), then the hidden ones of
@@ -93,10 +102,9 @@ class Mechanism:
         self.link_index = {name: k for k, name in enumerate(self.links)}
         self.active_index = [self.joint_index[name] for name in self.active_joints]
         try:
-            q, moved, problem = assembly.assemble(self)
-            self._assembled(q)
-            matrix, self.closure_rank, self.dof = degrees_of_freedom.count(self, moved, problem)
+            matrix = self._analyse()
             self._actuated(degrees_of_freedom.primary_actuators(self, matrix, self.dof))
+            degrees_of_freedom.report_dependent(self, matrix)
         except (np.linalg.LinAlgError, ArithmeticError, FloatingPointError) as exc:
             raise MechanismConfigError(
                 'mechanism.initial_positions',
@@ -106,7 +114,7 @@ class Mechanism:
         # what the kernels are made of stays what it was read as: read-only from here on
         self._frozen = True
 
-    def __setattr__(self, name, value):
+    def __setattr__(self, name: str, value: object) -> None:
         if getattr(self, '_frozen', False):
             raise AttributeError(
                 f'Mechanism.{name} is read-only: solvers and their compiled kernels are made '
@@ -116,7 +124,7 @@ class Mechanism:
 
     # --- reading ----------------------------------------------------------------------------
 
-    def _read_mechanism(self, r):
+    def _read_mechanism(self, r: ParameterReader) -> None:
         self.name = r.string('mechanism.name', default='mechanism')
         self.gravity = r.vector('mechanism.gravity', 3, default=(0.0, 0.0, -9.81))
         self.base_link = r.string('mechanism.base_link', default='ground')
@@ -146,6 +154,8 @@ class Mechanism:
                 'mechanism.gravity', f'must be at most {MAX_GRAVITY:g} m/s^2 long, got '
                                      f'{list(self.gravity)} ({gravity_norm:.6g} m/s^2)')
         m = len(self.active_joints)
+        #: torque_weights written: a redundancy is meant (degrees_of_freedom.report_dependent)
+        self.weights_given = r.has('mechanism.torque_weights')
         self.torque_weights = r.vector('mechanism.torque_weights', m, default=(1.0,) * m)
         for k, w in enumerate(self.torque_weights):
             if w <= 0.0:
@@ -167,7 +177,8 @@ class Mechanism:
                                                 high=MAX_CLOSURE_TOLERANCE)
 
     @staticmethod
-    def _positive(r, name, default, low=None, high=None):
+    def _positive(r: ParameterReader, name: str, default: float, low: float | None = None,
+                  high: float | None = None) -> float:
         value = r.number(name, default=default)
         if value <= 0.0:
             raise MechanismConfigError(name, f'must be positive, got {value!r}')
@@ -177,7 +188,7 @@ class Mechanism:
             raise MechanismConfigError(name, f'must be at most {high:g}, got {value!r}')
         return value
 
-    def _read_links(self, r):
+    def _read_links(self, r: ParameterReader) -> None:
         self.link_mass, self.link_com, self.link_inertia = [], [], []
         for link in self.links:
             prefix = f'links.{link}.'
@@ -193,7 +204,7 @@ class Mechanism:
                 MAX_LENGTH, 'm'))
             self.link_inertia.append(_inertia(r, prefix + 'inertia'))
 
-    def _read_joints(self, r):
+    def _read_joints(self, r: ParameterReader) -> None:
         """Every joint of mechanism.joints, read by its kind (joints.py): those with a
         coordinate (revolute, prismatic: ``joints``, ``joint_specs``) and those without one
         of their own (spherical, universal, fixed: ``closure_joints``, ``closure_specs``)."""
@@ -220,8 +231,8 @@ class Mechanism:
                 ends.append(known[link])
             if ends[0] == ends[1]:
                 raise MechanismConfigError(prefix + 'child', 'must differ from the parent link')
-            kind = kind_class.read(r, prefix)
-            offsets = {}
+            kind: Any = kind_class.read(r, prefix)     # a CoordinateKind if it has_coordinate
+            offsets: dict[str, tuple[float, ...]] = {}
             for key, bound, unit in (('parent_xyz', MAX_LENGTH, 'm'),
                                      ('parent_rpy', MAX_COORDINATE, 'rad'),
                                      ('child_xyz', MAX_LENGTH, 'm'),
@@ -242,7 +253,7 @@ class Mechanism:
         #: the largest attachment offset of a joint with a coordinate (m; 1.0 if none)
         self.attachment_scale = assembly.attachment_scale(self.joint_specs)
 
-    def _read_positions(self, r):
+    def _read_positions(self, r: ParameterReader) -> None:
         """initial_positions (one per revolute or prismatic joint); the actuators, which
         must have a coordinate, and their effort limits."""
         for name in self.active_joints:
@@ -275,7 +286,7 @@ class Mechanism:
                                   enumerate(self.active_position_limits)
                                   if lo > -math.inf or hi < math.inf]
 
-    def _reject_unknown(self, r):
+    def _reject_unknown(self, r: ParameterReader) -> None:
         for name in r.unused('mechanism.'):
             raise MechanismConfigError(
                 name, f"unknown parameter (mechanism.* takes {', '.join(MECHANISM_KEYS)})")
@@ -285,21 +296,22 @@ class Mechanism:
         for group, names, keys in (('links', self.links, LINK_KEYS),
                                    ('joints', self.declared_joints, joint_keys)):
             for name in r.unused(group + '.'):
-                parts = name.split('.')
-                if len(parts) < 3 or parts[1] not in names:
+                owner, key = split_owner(name[len(group) + 1:], names)
+                if owner is None:
                     raise MechanismConfigError(
-                        name, f"unknown {group[:-1]} '{parts[1]}' (not in mechanism.{group})")
-                kind = kinds.get(parts[1]) if group == 'joints' else None
-                why = kind.refused.get(parts[2]) if kind is not None else None
+                        name, f"unknown {group[:-1]} '{key.split('.')[0]}' (not in "
+                              f"mechanism.{group})")
+                kind: Any = kinds.get(owner) if group == 'joints' else None
+                why = kind.refused.get(key) if kind is not None else None
                 if why:
                     raise MechanismConfigError(name, f'not a parameter of a {kind.name} joint: '
                                                      f'a {kind.name} joint {why}')
                 raise MechanismConfigError(
-                    name, f"unknown parameter ({group}.{parts[1]}.* takes {', '.join(keys)})")
+                    name, f"unknown parameter ({group}.{owner}.* takes {', '.join(keys)})")
 
     # --- after reading: the solver form, the assembled pose, the actuators ------------------
 
-    def _solver_form(self):
+    def _solver_form(self) -> None:
         """What the solver solves (``solver_mechanism``): this mechanism, or, where three
         revolute joints through massless links are one spherical joint (spherical_chains.py,
         ``spherical_chains``), the same mechanism with those chains as spherical joints; and
@@ -312,6 +324,9 @@ class Mechanism:
             return
         params = spherical_chains.solver_parameters(self.parameters, chains, self.joints,
                                                     self.assembled_positions)
+        params.pop('mechanism.idle_spins', None)         # the spins are locked already
+        if self.locked_joints:
+            params['mechanism.locked_joints'] = list(self.locked_joints)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter('ignore', AssemblyWarning)
@@ -323,7 +338,8 @@ class Mechanism:
         self.spherical_chains, self.solver_mechanism = chains, solver
         self._readout = spherical_chains.JointReadout(self, solver)
 
-    def joints_at(self, coordinates, rates=None):
+    def joints_at(self, coordinates: Any,
+                  rates: Any = None) -> tuple[FloatArray, FloatArray | None]:
         """(positions, rates or None) of ``joints`` from the coordinates of
         ``solver_mechanism`` (and their rates): (n,) -> (len(joints),), (N, n) -> (N,
         len(joints)); the chains' angles read back from the pose."""
@@ -333,7 +349,7 @@ class Mechanism:
                 np.asarray(rates, dtype=float)[..., :len(self.joints)]
         return self._readout(coordinates, rates)
 
-    def coordinates_as_written(self, coordinates):
+    def coordinates_as_written(self, coordinates: Any) -> FloatArray:
         """Every coordinate of ``model`` (the joints, then its hidden ones) at the pose of
         the solver form's ``coordinates``: (n,) or (N, n) -> (model.n_coordinates,) or (N,
         ...). Hidden ones of this model are closed onto the joints' positions (load-time
@@ -348,36 +364,59 @@ class Mechanism:
                 for row in np.atleast_2d(positions)]
         return np.array(rows[0] if positions.ndim == 1 else rows)
 
-    def _assembled(self, q):
+    def _analyse(self) -> FloatArray:
+        """Assembly and the degrees of freedom (assembly.py, degrees_of_freedom.py); with
+        ``idle_spins: lock``, once more with the joints that take out the idle spins
+        locked (idle_spins.py). The closure Jacobian at the assembled pose."""
+        #: True once idle_spins: lock has locked joints of its own choice
+        self.spins_locked = False
+        notes: list[str] = []
+        while True:
+            q, moved, problem = assembly.assemble(self)
+            self._assembled(q)
+            try:
+                matrix, self.closure_rank, self.dof = degrees_of_freedom.count(
+                    self, moved, problem)
+            except idle_spins.LockThem as lock:
+                self.spins_locked, notes = True, lock.notes
+                self.locked_joints = self.locked_joints + [self.joints[j] for j in lock.joints]
+                self.locked_index = sorted(self.locked_index + lock.joints)
+                continue
+            for text in notes:
+                assembly.note(self, text)
+            return matrix
+
+    def _assembled(self, q: Sequence[float]) -> None:
         #: every coordinate of the solver at the assembled pose (hidden ones included)
         self.assembled_coordinates = tuple(q)
         self.assembled_positions = tuple(q[:len(self.joints)])
 
-    def _actuated(self, primary):
+    def _actuated(self, primary: list[int]) -> None:
         #: indices into active_joints of the ``dof`` primary actuators (degrees_of_freedom.py)
         self.primary = primary
         self.primary_joints = [self.active_index[i] for i in self.primary]
         #: (index into active_joints, joint index) of each primary actuator
         self.primary_pairs = list(zip(self.primary, self.primary_joints))
-        fixed = set(self.primary_joints)
+        fixed = set(self.primary_joints) | set(self.locked_index)
+        #: the coordinates solved for: all but the primary actuators and the locked joints
         self.free_joints = [j for j in range(self.n_coordinates) if j not in fixed]
         self.inverse_torque_weights = [1.0 / w for w in self.torque_weights]
 
-    def far_move_limit(self, j):
+    def far_move_limit(self, j: int) -> tuple[float, str | None]:
         """(limit, unit): assembly.far_move_limit, the move of joint j at assembly beyond
         which it is reported as far."""
         return assembly.far_move_limit(self, j)
 
     @property
-    def is_redundant(self):
+    def is_redundant(self) -> bool:
         return len(self.active_joints) > self.dof
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (f'Mechanism({self.name!r}: {len(self.links)} links, {len(self.joints)} joints, '
                 f'{len(self.model.loops)} loops, {self.dof} DOF, active {self.active_joints})')
 
 
-def _inertia(r, name):
+def _inertia(r: ParameterReader, name: str) -> tuple[float, ...]:
     values = r.vector(name, default=(0.0,) * 6)
     if len(values) not in (6, 9):
         raise MechanismConfigError(
@@ -388,14 +427,14 @@ def _inertia(r, name):
     return tuple(float(x) for x in _inertia_matrix(values).ravel())
 
 
-def _inertia_matrix(values):
+def _inertia_matrix(values: Sequence[float]) -> FloatArray:
     if len(values) == 6:
         ixx, iyy, izz, ixy, ixz, iyz = values
         return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
     return np.array(values).reshape(3, 3)
 
 
-def inertia_problem(values):
+def inertia_problem(values: Sequence[float]) -> str | None:
     """What makes ``values`` (6 entries [ixx, iyy, izz, ixy, ixz, iyz], or 9 row by row,
     finite) no rigid body's inertia, as a message, or None. One test for the native
     ``links.<l>.inertia`` and for the URDF's ``<inertia>`` (description/urdf_tree.py), so that both
@@ -416,7 +455,7 @@ def inertia_problem(values):
     return None
 
 
-def bounded(name, values, bound, unit):
+def bounded(name: str, values: Values, bound: float, unit: str) -> Values:
     """values unchanged, or MechanismConfigError if an entry exceeds +-bound. Also applied by
     description/loop_closures.py to the loop closures' offsets as written, in the same
     words."""
@@ -427,7 +466,7 @@ def bounded(name, values, bound, unit):
     return values
 
 
-def _check_sizes(links, joints, active):
+def _check_sizes(links: Sequence[str], joints: Sequence[str], active: Sequence[str]) -> None:
     """The documented size limits, before anything whose cost grows faster than the file."""
     loops = len(joints) - len(links)
     for name, count, limit, what in (
@@ -452,24 +491,18 @@ def _check_sizes(links, joints, active):
             f'size limits)')
 
 
-def _check_names(parameter, kind, names):
-    """Names of links and joints are parts of ROS 2 parameter names: letters, digits, '_'."""
+def name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name a link or joint (a control character in it), or None."""
+    found = NAME_REFUSED.search(name)
+    if found is None:
+        return None
+    return (f'holds the control character U+{ord(found.group()):04X} at index '
+            f'{found.start()}, which would split log lines, CSV rows and parameter keys')
+
+
+def _check_names(parameter: str, kind: str, names: Iterable[str]) -> None:
+    """Any name but one with a control character (NAME_REFUSED)."""
     for name in names:
-        if NAME_PATTERN.match(name):
-            continue
-        fixed = re.sub(r'[^A-Za-z0-9_]', '_', name)
-        if fixed[:1].isdigit():
-            fixed = f'{kind}_{fixed}'
-        if '.' in name:
-            why = (f"contains '.', which ROS 2 reads as a separator of parameter names "
-                   f"('{parameter.split('.')[1]}.{name}.*' is ambiguous)")
-        elif name[:1].isdigit():
-            why = 'starts with a digit, which a ROS 2 parameter name component must not'
-        else:
-            bad = sorted({c for c in name if not (c.isascii() and (c.isalnum() or c == '_'))})
-            why = f"contains {', '.join(repr(c) for c in bad)}"
-        raise MechanismConfigError(
-            parameter,
-            f"{kind} name '{name}' {why}; names of links and joints become parts of ROS 2 "
-            f"parameter names ({parameter.split('.')[1]}.<name>.*) and may hold only letters, "
-            f"digits and '_', not starting with a digit: use '_' instead, e.g. '{fixed}'")
+        problem = name_problem(name)
+        if problem:
+            raise MechanismConfigError(parameter, f'{kind} name {name!r} {problem}; remove it')

@@ -43,7 +43,9 @@ large one (more than ``QUICK_ABOVE`` operations, where -O2 takes seconds) is com
 ``-O0`` at once, which is fast to build and several times slower to run, while ``-O2`` is
 built in the background into the cache for the next load (one build at a time: a lock file,
 counted as stale, and broken with a log line, when it is older than ``BUILD_TIMEOUT`` or
-dated in the future).
+dated in the future). The background build runs at the lowest priority (niceness 19 and,
+on Linux, the idle scheduling class: native_build.lower_priority), so it only uses a core
+nothing else wants, and nothing waits for it: the first answer comes from the -O0 library.
 
 Nothing here is needed to run: without a compiler or headers :class:`NativeUnavailable`
 says why and the caller falls back to the Python kernels.

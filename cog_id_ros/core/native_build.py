@@ -13,7 +13,8 @@ checked and recorded.
   and its sha256 and size (the checksum last) appear whole, or nothing does.
 
 This module imports the standard library only: the detached background build
-(native.py) loads it by its file path, without the package, and runs :func:`build_detached`.
+(native.py) loads it by its file path, without the package, and runs :func:`build_detached`,
+which first gives itself and its compiler the lowest priority (:func:`lower_priority`).
 What to build, with which flags and how long it may take, is native.py's to say.
 """
 from collections.abc import Callable
@@ -108,14 +109,38 @@ def build_library(command: list[str], flags: list[str], c_file: str, target: str
 
 def build_detached(command: list[str], flags: list[str], c_file: str, target: str,
                    timeout: float, lock: str) -> None:
-    """The background build (in a process of its own): :func:`build_library`, then the
-    lock goes."""
+    """The background build (in a process of its own): at the lowest priority
+    (:func:`lower_priority`), :func:`build_library`, then the lock goes."""
     try:
+        lower_priority()
         build_library(command, flags, c_file, target, timeout)
     except (BuildFailed, OSError):
         pass                                  # the quick library serves; a later load retries
     finally:
         remove(lock)
+
+
+#: the niceness of the background build (the lowest priority there is)
+BACKGROUND_NICENESS = 19
+
+
+def lower_priority() -> None:
+    """Give this process, and the compiler it starts (which inherits both), the lowest
+    priority: niceness BACKGROUND_NICENESS and, where there is one (Linux), the idle
+    scheduling class SCHED_IDLE, which runs only on a core that nothing else wants. So a
+    background build takes no time from the process that answers (or from anything else on
+    the machine): it only uses a core that would otherwise idle. What the system does not
+    allow is left as it is."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, BACKGROUND_NICENESS)
+    except (AttributeError, OSError):
+        pass                                  # not POSIX, or not allowed: as it is
+    idle = getattr(os, 'SCHED_IDLE', None)
+    if idle is not None:
+        try:
+            os.sched_setscheduler(0, idle, os.sched_param(0))
+        except OSError:
+            pass
 
 
 def remove(path: str) -> None:

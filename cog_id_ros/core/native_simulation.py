@@ -2,7 +2,8 @@
 
 simulation.py's RK4 step calls the kernels about fifteen times and decides in Python between
 the calls; for a small mechanism the deciding costs more than the kernels. With compiled
-kernels the module also holds ``rk4_step``, the same step in C for the case the Python step
+kernels the library of the forward kernel (kernels.NativeKernels, loaded on first use)
+also holds ``rk4_step``, the same step in C for the case the Python step
 takes most often (every stage one continuation step away, closed by Newton, not singular),
 the same operations in the same order; otherwise it returns None and the Python step runs.
 This module writes the constants it is compiled with: the mechanism's sizes and joint

@@ -16,6 +16,7 @@ with a bounded ``show`` so that no message can grow without limit.
 """
 import math
 import reprlib
+from typing import Any, Iterable, Iterator, Literal, Mapping, overload
 
 from .errors import MechanismConfigError
 
@@ -34,7 +35,7 @@ _SHOW.maxlevel = 3
 _SHOW.maxlist = _SHOW.maxtuple = _SHOW.maxdict = _SHOW.maxset = 8
 
 
-def show(value):
+def show(value: object) -> str:
     """A bounded repr for messages: never expands a huge, nested or recursive value."""
     try:
         return _SHOW.repr(value)
@@ -42,7 +43,8 @@ def show(value):
         return f'<{type(value).__name__}>'
 
 
-def flatten(tree, prefix='', source='parameters'):
+def flatten(tree: Mapping[str, Any], prefix: str = '',
+            source: str = 'parameters') -> dict[str, Any]:
     """{'a': {'b': 1}} -> {'a.b': 1}; dotted keys that are already flat pass through.
 
     Keys must be strings. A mapping that contains itself (a recursive YAML alias), nesting
@@ -50,8 +52,8 @@ def flatten(tree, prefix='', source='parameters'):
     other expand exponentially) raise MechanismConfigError naming ``source`` or the
     parameter, after at most MAX_PARAMETERS steps.
     """
-    flat = {}
-    stack = [(iter(tree.items()), prefix, 0)]
+    flat: dict[str, Any] = {}
+    stack: list[tuple[Iterator[tuple[Any, Any]], str, int]] = [(iter(tree.items()), prefix, 0)]
     open_ids = [id(tree)]
     steps = 0
     while stack:
@@ -92,14 +94,14 @@ def flatten(tree, prefix='', source='parameters'):
 class ParameterReader:
     """Typed access to a dotted-name dict; every error names the parameter."""
 
-    def __init__(self, params):
+    def __init__(self, params: Mapping[str, Any]) -> None:
         self.params = flatten(params)
-        self.used = set()
+        self.used: set[str] = set()
 
-    def has(self, name):
+    def has(self, name: str) -> bool:
         return name in self.params
 
-    def raw(self, name, default=None, required=False):
+    def raw(self, name: str, default: Any = None, required: bool = False) -> Any:
         if name not in self.params:
             if required:
                 raise MechanismConfigError(name, 'missing')
@@ -112,24 +114,62 @@ class ParameterReader:
                       + ('' if required else ' to use the default'))
         return value
 
-    def string(self, name, default=None, required=False):
+    # the getters' overloads say what their callers know: a value is there when it is
+    # required (else MechanismConfigError) or has a default; None only when neither
+    @overload
+    def string(self, name: str, default: str, required: bool = False) -> str:
+        ...
+
+    @overload
+    def string(self, name: str, default: None = None, *, required: Literal[True]) -> str:
+        ...
+
+    @overload
+    def string(self, name: str, default: str | None = None,
+               required: bool = False) -> str | None:
+        ...
+
+    def string(self, name: str, default: str | None = None, required: bool = False) -> str | None:
         value = self.raw(name, default, required)
         if value is not None and not isinstance(value, str):
             raise MechanismConfigError(name, f'must be a string, got {show(value)}')
         return value
 
-    def number(self, name, default=None, required=False):
+    @overload
+    def number(self, name: str, default: float, required: bool = False) -> float:
+        ...
+
+    @overload
+    def number(self, name: str, default: None = None, *, required: Literal[True]) -> float:
+        ...
+
+    @overload
+    def number(self, name: str, default: float | None = None,
+               required: bool = False) -> float | None:
+        ...
+
+    def number(self, name: str, default: float | None = None,
+               required: bool = False) -> float | None:
         value = self.raw(name, default, required)
         return None if value is None else as_float(name, value)
 
-    def string_list(self, name, required=False):
+    @overload
+    def string_list(self, name: str, required: Literal[True]) -> list[str]:
+        ...
+
+    @overload
+    def string_list(self, name: str, required: bool = False) -> list[str] | None:
+        ...
+
+    def string_list(self, name: str, required: bool = False) -> list[str] | None:
         value = self.raw(name, None, required)
         if value is None:
             return None
         if isinstance(value, str) or not _is_sequence(value):
             raise MechanismConfigError(name, f'must be a list of names, got {show(value)}')
         _check_length(name, value)
-        names, seen = [], set()
+        names: list[str] = []
+        seen: set[str] = set()
         for item in value:
             if not isinstance(item, str) or not item:
                 raise MechanismConfigError(
@@ -140,7 +180,24 @@ class ParameterReader:
             names.append(item)
         return names
 
-    def vector(self, name, length=None, default=None, required=False):
+    @overload
+    def vector(self, name: str, length: int | None = None, *, default: Iterable[float],
+               required: bool = False) -> tuple[float, ...]:
+        ...
+
+    @overload
+    def vector(self, name: str, length: int | None = None, default: None = None, *,
+               required: Literal[True]) -> tuple[float, ...]:
+        ...
+
+    @overload
+    def vector(self, name: str, length: int | None = None,
+               default: Iterable[float] | None = None,
+               required: bool = False) -> tuple[float, ...] | None:
+        ...
+
+    def vector(self, name: str, length: int | None = None, default: Iterable[float] | None = None,
+               required: bool = False) -> tuple[float, ...] | None:
         value = self.raw(name, None, required)
         if value is None:
             return None if default is None else tuple(float(x) for x in default)
@@ -152,11 +209,11 @@ class ParameterReader:
             raise MechanismConfigError(name, f'must have {length} entries, got {len(numbers)}')
         return numbers
 
-    def unused(self, prefix):
+    def unused(self, prefix: str) -> list[str]:
         return sorted(k for k in self.params if k.startswith(prefix) and k not in self.used)
 
 
-def _is_sequence(value):
+def _is_sequence(value: object) -> bool:
     if isinstance(value, (list, tuple)):
         return True
     if isinstance(value, (dict, set, frozenset, bytes, bytearray)):
@@ -164,7 +221,7 @@ def _is_sequence(value):
     return hasattr(value, '__len__') and hasattr(value, '__iter__')
 
 
-def _check_length(name, value):
+def _check_length(name: str, value: Any) -> None:
     try:
         length = len(value)
     except Exception:  # noqa: BLE001 -- e.g. a 0-d numpy array
@@ -174,7 +231,7 @@ def _check_length(name, value):
             name, f'has {length} entries, more than the supported {MAX_LIST_LENGTH}')
 
 
-def as_float(name, value):
+def as_float(name: str, value: Any) -> float:
     if isinstance(value, bool) or \
             not isinstance(value, (int, float)) and not _is_number_like(value):
         raise MechanismConfigError(name, f'must be a number, got {show(value)}')
@@ -193,7 +250,7 @@ def as_float(name, value):
     return number
 
 
-def _finite_in_own_type(value):
+def _finite_in_own_type(value: Any) -> bool:
     try:
         import numpy as np
         return bool(np.isfinite(value))
@@ -201,9 +258,16 @@ def _finite_in_own_type(value):
         return False
 
 
-def _is_number_like(value):
+def _is_number_like(value: object) -> bool:
     try:
         import numpy as np
         return isinstance(value, np.number) and not isinstance(value, np.bool_)
     except ImportError:  # pragma: no cover
         return False
+
+
+def split_owner(rest: str, names: list) -> tuple:
+    """(name, key) of ``<name>.<key>``, the rest of a ``links.*`` or ``joints.*`` parameter,
+    for the longest of ``names`` it starts with (names may hold '.'); (None, rest) if none."""
+    owner = max((n for n in names if rest.startswith(n + '.')), key=len, default=None)
+    return (owner, rest[len(owner) + 1:]) if owner is not None else (None, rest)

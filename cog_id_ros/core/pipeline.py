@@ -17,15 +17,31 @@ straight-line kernels (``backend='python'``, ``'native'``: kernels.py), and on n
 for a batch with the reference kernels. ``ops`` says which: spatial.ScalarOps,
 spatial.ArrayOps or straight_line.SymOps.
 """
+from typing import Sequence
+
 from . import closure
 from . import spatial as sp
-from .cog_jacobian import cog_accelerations, cog_drifts, cog_jacobians, cog_poses, cog_velocities
+from .cog_jacobian import (
+    Cog,
+    Motion,
+    cog_accelerations,
+    cog_drifts,
+    cog_jacobians,
+    cog_poses,
+    cog_velocities,
+)
 from .joint_motion import active_velocity_map, closure_drift, combine
 from .kinematics import link_bias_accelerations, link_twists
 from .newton_euler import newton_euler_force, rotated_inertia_times
+from .value_types import Lane, LaneMatrix, MechanismLike, Ops, Twist, Vec3
+
+Pose = closure.ClosureSolution
+Matrix = Sequence[Sequence[Lane]]
+Force = tuple[Vec3, Vec3]    # (force, moment about the COG)
 
 
-def inverse_dynamics(mechanism, pose, basis, thetadot, thetaddot, ops):
+def inverse_dynamics(mechanism: MechanismLike, pose: Pose, basis: Matrix, thetadot: Sequence[Lane],
+                     thetaddot: Sequence[Lane], ops: Ops) -> list[Lane]:
     """tau_m (eq. 7) at a closed pose (closure.ClosureSolution) with velocity basis V."""
     cogs, jac, velocities, drifts = cog_motion(mechanism, pose, basis, thetadot, ops)  # (1)-(4)
     accelerations = cog_accelerations(jac, drifts, thetaddot)       # (4) qddot_i
@@ -33,7 +49,8 @@ def inverse_dynamics(mechanism, pose, basis, thetadot, thetaddot, ops):
     return active_torques(jac, forces)                              # (6)-(7) sum G_i^T F_i
 
 
-def cog_motion(mechanism, pose, basis, thetadot, ops):
+def cog_motion(mechanism: MechanismLike, pose: Pose, basis: Matrix, thetadot: Sequence[Lane],
+               ops: Ops) -> tuple[list[Cog], list[list[Motion]], list[Motion], list[Motion]]:
     """Eqs. (1)-(4) at a closed pose: COG poses g_i, COG Jacobians G_i, velocities
     G_i thetadot and drifts Gdot_i thetadot (the COG accelerations when thetaddot = 0)."""
     s, cogs, jac = cog_jacobians_at(mechanism, pose, basis, ops)    # (1), (3)
@@ -43,7 +60,8 @@ def cog_motion(mechanism, pose, basis, thetadot, ops):
     return cogs, jac, velocities, drifts
 
 
-def cog_jacobians_at(mechanism, pose, basis, ops):
+def cog_jacobians_at(mechanism: MechanismLike, pose: Pose, basis: Matrix,
+                     ops: Ops) -> tuple[LaneMatrix, list[Cog], list[list[Motion]]]:
     """The joint-rate map S, g_i (eq. 1) and G_i (eq. 3) at a closed pose."""
     s = active_velocity_map(mechanism, basis, ops)                  # qdot = S thetadot
     cogs = cog_poses(mechanism, pose.frames)                        # (1) g_i
@@ -51,7 +69,8 @@ def cog_jacobians_at(mechanism, pose, basis, ops):
     return s, cogs, jac
 
 
-def equation_of_motion(mechanism, pose, basis, thetadot, ops):
+def equation_of_motion(mechanism: MechanismLike, pose: Pose, basis: Matrix,
+                       thetadot: Sequence[Lane], ops: Ops) -> tuple[LaneMatrix, list[Lane]]:
     """H and B of eq. (7): tau = H thetaddot + B. B is eq. (7) with thetaddot = 0; H is
     sum_i G_i^T M_i G_i."""
     cogs, jac, velocities, drifts = cog_motion(mechanism, pose, basis, thetadot, ops)
@@ -59,7 +78,8 @@ def equation_of_motion(mechanism, pose, basis, thetadot, ops):
     return inertia_matrix(mechanism, cogs, jac), b
 
 
-def drift_accelerations(mechanism, pose, s, thetadot):
+def drift_accelerations(mechanism: MechanismLike, pose: Pose, s: Matrix,
+                        thetadot: Sequence[Lane]) -> list[Twist]:
     """Spatial acceleration of every link when thetaddot_m = 0: the link-level Gdot thetadot
     of eq. (4). The joints' own bias (joint twists turning with their inner body) plus the
     joint accelerations d that keep the loops closed (joint_motion.closure_drift)."""
@@ -67,7 +87,8 @@ def drift_accelerations(mechanism, pose, s, thetadot):
     return link_drift(mechanism, pose, bias, drift)
 
 
-def joint_drift(mechanism, pose, s, thetadot):
+def joint_drift(mechanism: MechanismLike, pose: Pose, s: Matrix,
+                thetadot: Sequence[Lane]) -> tuple[list[Twist], list[Lane]]:
     """(bias, d): the links' bias accelerations (joint twists turning with their inner body)
     and the joint accelerations d that keep the loops closed when thetaddot_m = 0."""
     model = mechanism.model
@@ -78,15 +99,17 @@ def joint_drift(mechanism, pose, s, thetadot):
     return bias, closure_drift(mechanism, pose, s, beta)
 
 
-def link_drift(mechanism, pose, bias, drift):
+def link_drift(mechanism: MechanismLike, pose: Pose, bias: Sequence[Twist],
+               drift: Sequence[Lane]) -> list[Twist]:
     """The links' spatial accelerations from their bias and the joint accelerations d."""
     drift_twists = link_twists(mechanism.model, pose.frames, drift)
     return [sp.twist_add_scaled(b, d, 1.0) for b, d in zip(bias, drift_twists)]
 
 
-def link_forces(mechanism, cogs, velocities, accelerations):
+def link_forces(mechanism: MechanismLike, cogs: Sequence[Cog], velocities: Sequence[Motion],
+                accelerations: Sequence[Motion]) -> list[Force | None]:
     """F_i (eq. 5) for every link; None for a massless link (it contributes nothing)."""
-    forces = []
+    forces: list[Force | None] = []
     for i, ((a, alpha), (_, w)) in enumerate(zip(accelerations, velocities)):
         mass, inertia = mechanism.link_mass[i], mechanism.link_inertia[i]
         forces.append(None if massless(mass, inertia) else
@@ -95,10 +118,11 @@ def link_forces(mechanism, cogs, velocities, accelerations):
     return forces
 
 
-def active_torques(jacobians, forces):
+def active_torques(jacobians: Sequence[Sequence[Motion]],
+                   forces: Sequence[Force | None]) -> list[Lane]:
     """tau = sum_i G_i^T F_i (eqs. 6-7); links with force None (massless) contribute nothing."""
     m = len(jacobians[0]) if jacobians else 0
-    tau = [0.0] * m
+    tau: list[Lane] = [0.0] * m
     for cols, force in zip(jacobians, forces):
         if force is None:
             continue
@@ -108,10 +132,11 @@ def active_torques(jacobians, forces):
     return tau
 
 
-def inertia_matrix(mechanism, cogs, jacobians):
+def inertia_matrix(mechanism: MechanismLike, cogs: Sequence[Cog],
+                   jacobians: Sequence[Sequence[Motion]]) -> LaneMatrix:
     """H = sum_i G_i^T M_i G_i (eq. 7), as a list of rows of lanes."""
     m = len(mechanism.active_joints)
-    h = [[0.0] * m for _ in range(m)]
+    h: LaneMatrix = [[0.0] * m for _ in range(m)]
     for i, cols in enumerate(jacobians):
         mass, inertia = mechanism.link_mass[i], mechanism.link_inertia[i]
         if massless(mass, inertia):
@@ -129,5 +154,5 @@ def inertia_matrix(mechanism, cogs, jacobians):
     return h
 
 
-def massless(mass, inertia):
+def massless(mass: float, inertia: Sequence[float]) -> bool:
     return mass == 0.0 and not any(inertia)

@@ -6,7 +6,7 @@ the warm start like torques (sample_solve.py, batch.py), then evaluated once mor
 code, on floats or on (N,) lanes. Nothing is kept: the solver moves its warm start only
 when it accepts a result (InverseDynamics._moved_to).
 """
-from typing import NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -16,11 +16,18 @@ from .errors import SingularConfigurationError
 from .inputs import check_values, setpoint_arrays
 from .joint_motion import velocity_basis
 from .lanes import columns
+from .value_types import LaneMatrix
+
+if TYPE_CHECKING:
+    from .batch import Batch
+    from .continuation import State
+    from .mechanism import Mechanism
+    from .sample_solve import SampleSolver
 
 
 class Poses(NamedTuple):
     positions: np.ndarray      # every joint of mechanism.joints: (n_joints,) or (N, n_joints)
-    pose: object               # closure.ClosureSolution on floats or (N,) lanes
+    pose: closure.ClosureSolution  # on floats or (N,) lanes
     basis: list                # velocity basis V (list over joints)
     rates: list                # thetadot as lanes
     ops: type                  # spatial.ScalarOps or ArrayOps
@@ -29,7 +36,8 @@ class Poses(NamedTuple):
     single: bool
 
 
-def pose_of(mechanism, positions):
+def pose_of(mechanism: 'Mechanism',
+            positions: np.ndarray) -> tuple[closure.ClosureSolution, LaneMatrix]:
     """(closure solution, velocity basis) of N poses (N, n_joints) on (N,) lanes, for the
     lane code of eqs. (1)-(4); nothing solved."""
     pose = closure.evaluate(mechanism.model, columns(positions), mechanism.free_joints,
@@ -41,11 +49,13 @@ class PoseSolver:
     """The closed poses of one mechanism (as written) for its solver's per-sample and batch
     paths."""
 
-    def __init__(self, mechanism, sample_solver, batch):
+    def __init__(self, mechanism: 'Mechanism', sample_solver: 'SampleSolver',
+                 batch: 'Batch') -> None:
         self.mechanism = mechanism
         self.serial, self.batch = sample_solver, batch
 
-    def at(self, state, q, qd, solved=False, velocities=False):
+    def at(self, state: 'State', q: Any, qd: Any, solved: bool = False,
+           velocities: bool = False) -> Poses:
         """The closed poses (Poses) of one sample or a batch ``q`` with rates ``qd`` from the
         warm start ``state``, of the mechanism as written (of its solver form with
         ``solved``). ``velocities``: the velocity basis is used, so a chain of revolutes
@@ -76,13 +86,13 @@ class PoseSolver:
             self.away_from_locks(at)
         return at
 
-    def away_from_locks(self, at):
+    def away_from_locks(self, at: Poses) -> None:
         """SingularConfigurationError where the mechanism as written is singular at a pose
         its solver form is not: a chain of three revolutes at its gimbal lock, whose rates
         (and so the per-link quantities of the links as written) are not defined there."""
         m = self.mechanism
         with np.errstate(all='ignore'):
-            condition = np.atleast_1d(np.asarray(at.pose.lsq.condition_number(), float))
+            condition = np.atleast_1d(np.asarray(at.pose.lsq.condition_number(), np.float64))
         bad = np.flatnonzero(~(condition <= m.max_condition_number))
         if bad.size:
             k = int(bad[0])

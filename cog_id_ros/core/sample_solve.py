@@ -16,11 +16,13 @@ singular, inconsistent, unreachable); the warm start is the caller's and is neve
 here.
 """
 import math
+from typing import TYPE_CHECKING, Any, Sequence
 
 from .closure import loops_closed
 from .continuation import (
     MAX_STEPS,
     MIN_STEP,
+    State,
     actuator_ratio,
     correction_bounds,
     correction_ok,
@@ -34,6 +36,11 @@ from .continuation import (
 from .errors import ClosureError, SingularConfigurationError
 from .inputs import out_of_range
 from .joint_motion import BasisLayout, projected_pose
+from .value_types import LaneMatrix
+
+if TYPE_CHECKING:
+    from .kernels import PoseRecord, ReferenceKernels
+    from .mechanism import Mechanism
 
 #: Newton iterations of one continuation step (from a first-order prediction within the
 #: step limits Newton converges in a few; more means the step is too long: it is halved)
@@ -68,7 +75,8 @@ class SampleSolver:
     (accelerations from qd and the efforts, in place of qdd: forward_dynamics.py).
     """
 
-    def __init__(self, mechanism, kernels, continuation_step, whole='dynamics'):
+    def __init__(self, mechanism: 'Mechanism', kernels: 'ReferenceKernels',
+                 continuation_step: float, whole: str = 'dynamics') -> None:
         m = self.mechanism = mechanism
         self.kernels = kernels
         self.whole_name = whole
@@ -82,7 +90,9 @@ class SampleSolver:
         self.zeros = [0.0] * len(m.active_joints)
         self.layout = BasisLayout(m)
 
-    def solve(self, state, target, qd=None, qdd=None, sample=None, project=True):
+    def solve(self, state: State, target: Sequence[float], qd: Sequence[float] | None = None,
+              qdd: Sequence[float] | None = None, sample: int | None = None,
+              project: bool = True) -> tuple['PoseRecord', State]:
         """(PoseRecord at ``target``, new state) by continuation from ``state``. Without
         ``project``, a redundant mechanism's primary actuators are put at their targets and
         the others follow from the closure (their targets are not used)."""
@@ -143,7 +153,9 @@ class SampleSolver:
         raise unreachable(m, start, target, sample,
                           f'not reached in {MAX_STEPS} continuation steps')
 
-    def solve_torques(self, state, target, qd, qdd, sample=None):
+    def solve_torques(self, state: State, target: Sequence[float], qd: Sequence[float],
+                      qdd: Sequence[float],
+                      sample: int | None = None) -> tuple['PoseRecord', State]:
         """:meth:`solve`, and SetpointError (reason 'out_of_range') where the torques there
         are not finite; the warm start is the caller's."""
         record, state = self.solve(state, target, qd, qdd, sample)
@@ -151,7 +163,9 @@ class SampleSolver:
             raise out_of_range(qd, qdd, sample)
         return record, state
 
-    def step(self, predicted, goal, final, qd, qdd, sample):
+    def step(self, predicted: Sequence[float], goal: Sequence[float], final: bool,
+             qd: Sequence[float], qdd: Sequence[float],
+             sample: int | None) -> tuple['PoseRecord', State, Sequence[float]]:
         """One continuation step: close the loops from ``predicted``, check, and when
         ``final`` (the final step, projected) for a redundant mechanism project onto
         ``goal``. Returns (PoseRecord, new state,
@@ -167,7 +181,9 @@ class SampleSolver:
             raise singular(m, record.condition, sample)
         return record, (q, self.layout.rows(record.basis)), closed
 
-    def close(self, q, goal, qd, qdd, likely_closed=False):
+    def close(self, q: Sequence[float], goal: Sequence[float], qd: Sequence[float],
+              qdd: Sequence[float],
+              likely_closed: bool = False) -> tuple[Sequence[float], 'PoseRecord', int, bool]:
         """Newton's method on the loop equations from ``q``, moving the free joints.
 
         Returns (q, PoseRecord at q, iterations, closed); when not closed the record is
@@ -176,7 +192,8 @@ class SampleSolver:
         small increment, or when ``likely_closed``, the whole record is evaluated at once."""
         kernels, tol, free, evaluate = self.kernels, self.tolerance, self.free, self.whole
         whole = likely_closed
-        record = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
+        # a ClosureRecord while the loops are probably not closed, a whole record once they are
+        record: Any = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
             if loops_closed(record.worst, record.least_cosine, tol):
                 if not whole:
@@ -199,7 +216,9 @@ class SampleSolver:
             record = evaluate(q, goal, qd, qdd)
         return q, record, iteration, False
 
-    def project(self, q, record, target, qd, qdd, sample):
+    def project(self, q: Sequence[float], record: 'PoseRecord', target: Sequence[float],
+                qd: Sequence[float], qdd: Sequence[float],
+                sample: int | None) -> tuple[Sequence[float], 'PoseRecord']:
         """Redundant actuation: Gauss-Newton over closed poses towards ``target``; the
         setpoint must then be within mechanism.setpoint_tolerance of the pose."""
         m = self.mechanism
@@ -220,20 +239,20 @@ class SampleSolver:
                 f'{m.setpoint_tolerance:.6g}', mismatch, sample, reason='inconsistent')
         return q, record
 
-    def basis(self, record):
+    def basis(self, record: 'PoseRecord') -> LaneMatrix:
         """The velocity basis V (list over joints) from a record's rows of the free joints."""
         return self.layout.rows(record.basis)
 
 
-def _where(sample):
+def _where(sample: int | None) -> str:
     return '' if sample is None else f'sample {sample}: '
 
 
-def _fmt(values):
+def _fmt(values: Sequence[float]) -> str:
     return '[' + ', '.join(f'{v:.6g}' for v in values) + ']'
 
 
-def not_closed(record, tolerance, iterations, sample):
+def not_closed(record: Any, tolerance: float, iterations: int, sample: int | None) -> ClosureError:
     residual = record.worst
     return ClosureError(
         f'{_where(sample)}the loops cannot be closed at this setpoint: closure residual '
@@ -241,14 +260,16 @@ def not_closed(record, tolerance, iterations, sample):
         residual, sample)
 
 
-def singular(mechanism, condition, sample):
+def singular(mechanism: 'Mechanism', condition: float,
+             sample: int | None) -> SingularConfigurationError:
     return SingularConfigurationError(
         f'{_where(sample)}singular configuration: closure Jacobian condition number '
         f'{condition:.3g} exceeds mechanism.max_condition_number '
         f'{mechanism.max_condition_number:.3g}', condition, sample)
 
 
-def unreachable(mechanism, start, target, sample, why):
+def unreachable(mechanism: 'Mechanism', start: State, target: Sequence[float], sample: int | None,
+                why: str) -> ClosureError:
     """ClosureError(reason='unreachable') for a setpoint continuation cannot get to."""
     q = start[0]
     last = [q[j] for j in mechanism.active_index]

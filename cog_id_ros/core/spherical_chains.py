@@ -10,7 +10,7 @@ torques are the same (the helper links carry no mass); the work is about half.
 
 A chain P -j1- a -j2- b -j3- C qualifies when:
 
-* j1, j2, j3 are revolute and passive (not in active_joints);
+* j1, j2, j3 are revolute and passive (not in active_joints, not locked);
 * a and b have zero mass and inertia and no joint but these;
 * consecutive axes meet at right angles in one point: j1 and j2 in link a, j2 and j3 in
   link b, at the same point of j2's axis;
@@ -39,13 +39,16 @@ the motion (a ball joint on a turning crank), as written they would count the tu
 """
 from dataclasses import dataclass
 import math
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from . import kinematics as kin
 from . import spatial as sp
 from .joints import Revolute, Spherical
+from .parameters import split_owner
 from .pipeline import massless
+from .value_types import FloatArray, Lane, MechanismLike, Ops, Rotation, Vec3
 
 #: cosine below which two axes count as perpendicular, and the distance (times the
 #: mechanism's largest joint offset, at least 1 m) within which axes count as meeting
@@ -72,23 +75,27 @@ class SphericalChain:
     frame_c: tuple
     centre_p: tuple
     centre_c: tuple
-    axes: tuple          # e1, e2, e3 (frame_p, angles 0), signed as the coordinates turn C
+    axes: tuple[Vec3, Vec3, Vec3]  # e1, e2, e3 (frame_p, angles 0), signed as the coordinates
+    #                                turn C
     reference: tuple     # the three joint coordinates at the initial positions
     lock_distance: float = 1.0   # |e1 x T e3| there: 0 at the gimbal lock
 
 
-def chains_of(mechanism, near_lock=False):
+def chains_of(mechanism: MechanismLike, near_lock: bool = False) -> list[SphericalChain]:
     """:func:`find_chains` of a Mechanism at its assembled pose."""
     m = mechanism
     return find_chains(
         m.links, m.base_link,
         [massless(mass, inertia) for mass, inertia in zip(m.link_mass, m.link_inertia)],
-        m.joint_specs, m.closure_specs, set(m.active_joints), m.assembled_positions,
+        m.joint_specs, m.closure_specs, set(m.active_joints) | set(m.locked_joints),
+        m.assembled_positions,
         max(1.0, m.attachment_scale), near_lock)
 
 
-def find_chains(links, base_link, massless, specs, closure_specs, active, positions, scale,
-                near_lock=False):
+def find_chains(links: Sequence[str], base_link: str, massless: Sequence[bool],
+                specs: Sequence[kin.JointSpec], closure_specs: Sequence[kin.JointSpec],
+                active: set[str], positions: Sequence[float], scale: float,
+                near_lock: bool = False) -> list[SphericalChain]:
     """The qualifying chains (module docstring) among revolute and prismatic ``specs``
     (JointSpec, link indices into ``links``, -1 the base), with ``positions`` one per spec.
 
@@ -100,14 +107,16 @@ def find_chains(links, base_link, massless, specs, closure_specs, active, positi
         for link in (spec.parent, spec.child):
             if link >= 0:
                 degree[link] += 1
-    by_link = {}
+    by_link: dict[int, list[int]] = {}
     for j, spec in enumerate(specs):
         for link in (spec.parent, spec.child):
             by_link.setdefault(link, []).append(j)
     helper = [massless[k] and degree[k] == 2 and len(by_link.get(k, ())) == 2 and
               all(specs[j].kind.name == Revolute.name and specs[j].name not in active
                   for j in by_link[k]) for k in range(len(links))]
-    used, chains, taken = set(), [], set()
+    used: set[int] = set()
+    chains: list[SphericalChain] = []
+    taken: set[str] = set()
     names = {spec.name for spec in list(specs) + list(closure_specs)}
     for j2, middle in enumerate(specs):
         a, b = middle.parent, middle.child
@@ -130,11 +139,11 @@ def find_chains(links, base_link, massless, specs, closure_specs, active, positi
     return [chain for chain in chains if not ends & set(chain.helpers)]
 
 
-def _other(spec, link):
+def _other(spec: kin.JointSpec, link: int) -> int:
     return spec.child if spec.parent == link else spec.parent
 
 
-def _side(spec, link):
+def _side(spec: kin.JointSpec, link: int) -> tuple[Rotation, Vec3, float]:
     """(rotation, origin, sign) of ``spec``'s attachment frame on ``link``; sign +1 when the
     joint moves the other link relative to this one by +q."""
     if spec.parent == link:
@@ -142,7 +151,8 @@ def _side(spec, link):
     return sp.rpy_matrix(spec.child_rpy), tuple(spec.child_xyz), -1.0
 
 
-def _meeting(r1, o1, axis1, r2, o2, axis2, scale):
+def _meeting(r1: Rotation, o1: Vec3 | FloatArray, axis1: Vec3, r2: Rotation,
+             o2: Vec3 | FloatArray, axis2: Vec3, scale: float) -> tuple[float, float] | None:
     """Distances along the two lines (o1 + s d1, o2 + t d2, d = r axis) to where they meet
     at right angles, or None."""
     d1, d2 = np.array(sp.mat_vec(r1, axis1)), np.array(sp.mat_vec(r2, axis2))
@@ -156,7 +166,9 @@ def _meeting(r1, o1, axis1, r2, o2, axis2, scale):
     return s, t
 
 
-def _chain(links, base_link, specs, joints, chain_links, positions, scale, names):
+def _chain(links: Sequence[str], base_link: str, specs: Sequence[kin.JointSpec],
+           joints: tuple[int, int, int], chain_links: tuple[int, int, int, int],
+           positions: Sequence[float], scale: float, names: set[str]) -> SphericalChain | None:
     (j1, j2, j3), (p, a, b, c) = joints, chain_links
     r1p, o1p, s1 = _side(specs[j1], p)
     r1a, o1a, _ = _side(specs[j1], a)
@@ -192,16 +204,20 @@ def _chain(links, base_link, specs, joints, chain_links, positions, scale, names
         lock_distance=lock_distance)
 
 
-def solver_parameters(params, chains, joints, positions):
+def solver_parameters(params: Mapping[str, Any], chains: Sequence[SphericalChain],
+                      joints: Sequence[str], positions: Iterable[float]) -> dict[str, Any]:
     """The parameters (flat, dotted) of the same mechanism with every chain one spherical
     joint: its helper links and joints gone, the spherical joint listed where its first
     joint was, and initial_positions ``positions`` (one per joint of ``joints``, the
     revolute and prismatic ones) without the chains' entries."""
     links = {h for chain in chains for h in chain.helpers}
     chain_of = {j: chain for chain in chains for j in chain.joints}
+    # (names may hold '.': a key's owner is the longest name it starts with)
     out = {key: value for key, value in params.items()
-           if not (key.startswith('links.') and key.split('.')[1] in links or
-                   key.startswith('joints.') and key.split('.')[1] in chain_of)}
+           if not (key.startswith('links.') and split_owner(
+                       key[len('links.'):], params['mechanism.links'])[0] in links or
+                   key.startswith('joints.') and split_owner(
+                       key[len('joints.'):], params['mechanism.joints'])[0] in chain_of)}
     out['mechanism.links'] = [name for name in params['mechanism.links'] if name not in links]
     out['mechanism.joints'] = [chain_of[name].name if name in chain_of else name
                                for name in params['mechanism.joints']
@@ -219,11 +235,11 @@ def solver_parameters(params, chains, joints, positions):
     return out
 
 
-def with_chain_starts(mechanism, start):
+def with_chain_starts(mechanism: MechanismLike, start: list[float]) -> list[float]:
     """The start of assembly ``start`` of a mechanism that is another's solver form, with
     the quaternion of every spherical tree joint that stands for a chain of three
     revolutes (``mechanism.stands_for``) at the chain's initial angles T."""
-    chains = {chain.name: chain for chain in mechanism.stands_for}
+    chains: dict[str, SphericalChain] = {chain.name: chain for chain in mechanism.stands_for}
     for e in mechanism.model.edges:
         chain = chains.get(e.name)     # the spherical joint's edge: it has the chain's name
         if chain is None:
@@ -236,7 +252,7 @@ def with_chain_starts(mechanism, start):
     return start
 
 
-def _rotation(e1, e2, e3, angles):
+def _rotation(e1: Vec3, e2: Vec3, e3: Vec3, angles: Iterable[float]) -> Rotation:
     rot = sp.IDENTITY
     for axis, angle in zip((e1, e2, e3), angles):
         rot = sp.mat_mat(rot, sp.rotation_about(axis, angle))
@@ -245,16 +261,19 @@ def _rotation(e1, e2, e3, angles):
 
 # --- reading the angles back (on lanes: floats for one sample, (N,) arrays for N) -------
 
-def chain_turn(chain, rot_p, rot_c):
+def chain_turn(chain: SphericalChain, rot_p: Rotation | None, rot_c: Rotation | None) -> Rotation:
     """T = frame_p^T R_P^T R_C frame_c from the link rotations of P and C (9-tuples of
     lanes, base frame; None for the base link)."""
-    relative = sp.mat_mat(sp.transpose(rot_p), rot_c) if rot_p is not None else rot_c
-    if relative is None:
-        relative = sp.IDENTITY
+    if rot_p is None:
+        relative = sp.IDENTITY if rot_c is None else rot_c
+    elif rot_c is None:                    # C is the base link
+        relative = sp.transpose(rot_p)
+    else:
+        relative = sp.mat_mat(sp.transpose(rot_p), rot_c)
     return sp.mat_mat(sp.mat_mat(sp.transpose(chain.frame_p), relative), chain.frame_c)
 
 
-def chain_angles(chain, turn, ops):
+def chain_angles(chain: SphericalChain, turn: Rotation, ops: Ops) -> tuple[Lane, ...]:
     """The three joint coordinates (lanes) of T (a 9-tuple of lanes): the middle one on the
     root nearest its assembled value, each within pi of its assembled value."""
     e1, e2, e3 = chain.axes
@@ -269,7 +288,8 @@ def chain_angles(chain, turn, ops):
     return tuple(r + _wrap(q - r) for q, r in zip((q1, q2, q3), ref))
 
 
-def chain_rates(chain, angles, omega, ops):
+def chain_rates(chain: SphericalChain, angles: Sequence[Lane], omega: Vec3,
+                ops: Ops) -> tuple[Lane, Lane, Lane]:
     """The three joint rates (lanes) from the angles (chain_angles) and the angular
     velocity of C relative to P in frame_p (3 lanes), by Cramer's rule: at the lock (det 0)
     they are not finite, never an exception."""
@@ -282,21 +302,21 @@ def chain_rates(chain, angles, omega, ops):
             sp.dot(e1, sp.cross(w2, omega)) * scale)
 
 
-def _rotate(axis, angle, v, ops):
+def _rotate(axis: Vec3, angle: Lane, v: Vec3, ops: Ops) -> Vec3:
     """Rot(axis, angle) v (Rodrigues) for a constant unit axis and lanes."""
     c, s = ops.cos(angle), ops.sin(angle)
     along = sp.dot(axis, v) * (1.0 - c)
     return tuple(x * c + k * s + a * along for x, k, a in zip(v, sp.cross(axis, v), axis))
 
 
-def _turn_angle(axis, v, w, ops):
+def _turn_angle(axis: Vec3, v: Vec3, w: Vec3, ops: Ops) -> Lane:
     """The angle of the rotation about ``axis`` that takes v onto w (at the same angle to
     the axis)."""
     return ops.atan2(sp.dot(sp.cross(v, w), axis),
                      sp.dot(v, w) - sp.dot(v, axis) * sp.dot(w, axis))
 
 
-def _wrap(x):
+def _wrap(x: Lane) -> Lane:
     return (x + math.pi) % (2.0 * math.pi) - math.pi
 
 
@@ -307,7 +327,7 @@ class JointReadout:
     (``mechanism.solver_mechanism``): the joints it kept are copied, the chains' angles read
     back from the link rotations (one sample on floats, N on (N,) lanes)."""
 
-    def __init__(self, mechanism, solver):
+    def __init__(self, mechanism: MechanismLike, solver: MechanismLike) -> None:
         kept = [(k, solver.joint_index[name]) for k, name in enumerate(mechanism.joints)
                 if name in solver.joint_index]
         self.kept_joints = [k for k, _ in kept]
@@ -319,13 +339,14 @@ class JointReadout:
         self.n_joints = len(mechanism.joints)
         self.model = solver.model
 
-    def __call__(self, coordinates, rates=None):
+    def __call__(self, coordinates: Any,
+                 rates: Any = None) -> tuple[FloatArray, FloatArray | None]:
         """(positions, rates or None): (n_joints,) for coordinates (n,), (N, n_joints) for
         (N, n); ``rates`` the coordinates' rates, the same shape."""
         q = np.asarray(coordinates, dtype=float)
         single = q.ndim == 1
         q = np.atleast_2d(q)
-        qdot = None if rates is None else np.atleast_2d(np.asarray(rates, dtype=float))
+        qdot: Any = None if rates is None else np.atleast_2d(np.asarray(rates, dtype=float))
         ops = sp.ScalarOps if single else sp.ArrayOps
         lanes = q[0].tolist() if single else list(q.T)
         frames = kin.forward_kinematics(self.model, lanes, ops)

@@ -16,18 +16,20 @@ results agree with it to the last bit (up to the sign of a zero).
 Only branch-free lane code can be traced: a comparison of a ``Sym`` raises TypeError.
 """
 import math
+from typing import Any, Callable, NoReturn, Sequence
 
 from .spatial import larger, smaller
+from .value_types import Lane
 
 
 class Graph:
     """The recorded operations: node k is (op, operands); operands are node ids or floats."""
 
-    def __init__(self):
-        self.nodes = []
-        self._index = {}
+    def __init__(self) -> None:
+        self.nodes: list[tuple[str, tuple[Any, ...]]] = []
+        self._index: dict[tuple[Any, ...], Sym] = {}
 
-    def node(self, op, args):
+    def node(self, op: str, args: Sequence[Any]) -> 'Sym':
         key = (op,) + tuple(a.k if isinstance(a, Sym) else ('c', a) for a in args)
         sym = self._index.get(key)
         if sym is None:
@@ -35,16 +37,16 @@ class Graph:
             self.nodes.append((op, tuple(a.k if isinstance(a, Sym) else a for a in args)))
         return sym
 
-    def inputs(self, name, n):
+    def inputs(self, name: str, n: int) -> list['Sym']:
         """n symbolic inputs called name[0] .. name[n-1]."""
         return [self.node('in', (f'{name}[{i}]',)) for i in range(n)]
 
 
-def _is_const(x):
+def _is_const(x: Lane) -> bool:
     return not isinstance(x, Sym)
 
 
-def _add(a, b):
+def _add(a: Lane, b: Lane) -> Lane:
     if _is_const(a):
         if _is_const(b):
             return a + b
@@ -56,7 +58,7 @@ def _add(a, b):
     return a.graph.node('add', (a, b if isinstance(b, Sym) else float(b)))
 
 
-def _sub(a, b):
+def _sub(a: Lane, b: Lane) -> Lane:
     if _is_const(b):
         if _is_const(a):
             return a - b
@@ -70,7 +72,7 @@ def _sub(a, b):
     return b.graph.node('sub', (a if isinstance(a, Sym) else float(a), b))
 
 
-def _mul(a, b):
+def _mul(a: Lane, b: Lane) -> Lane:
     if _is_const(a):
         if _is_const(b):
             return a * b
@@ -86,7 +88,7 @@ def _mul(a, b):
     return a.graph.node('mul', (a, b))
 
 
-def _div(a, b):
+def _div(a: Lane, b: Lane) -> Lane:
     if _is_const(b):
         if _is_const(a):
             return a / b
@@ -98,7 +100,7 @@ def _div(a, b):
     return b.graph.node('div', (a if isinstance(a, Sym) else float(a), b))
 
 
-def _neg(a):
+def _neg(a: Lane) -> Lane:
     if _is_const(a):
         return -a
     op, args = a.graph.nodes[a.k]
@@ -112,57 +114,57 @@ class Sym:
     __slots__ = ('graph', 'k')
     __array_ufunc__ = None    # numpy scalars defer to the reflected operators below
 
-    def __init__(self, graph, k):
+    def __init__(self, graph: Graph, k: int) -> None:
         self.graph, self.k = graph, k
 
-    def __add__(self, other):
+    def __add__(self, other: Lane) -> Lane:
         return _add(self, other)
 
-    def __radd__(self, other):
+    def __radd__(self, other: Lane) -> Lane:
         return _add(other, self)
 
-    def __sub__(self, other):
+    def __sub__(self, other: Lane) -> Lane:
         return _sub(self, other)
 
-    def __rsub__(self, other):
+    def __rsub__(self, other: Lane) -> Lane:
         return _sub(other, self)
 
-    def __mul__(self, other):
+    def __mul__(self, other: Lane) -> Lane:
         return _mul(self, other)
 
-    def __rmul__(self, other):
+    def __rmul__(self, other: Lane) -> Lane:
         return _mul(other, self)
 
-    def __truediv__(self, other):
+    def __truediv__(self, other: Lane) -> Lane:
         return _div(self, other)
 
-    def __rtruediv__(self, other):
+    def __rtruediv__(self, other: Lane) -> Lane:
         return _div(other, self)
 
-    def __neg__(self):
+    def __neg__(self) -> Lane:
         return _neg(self)
 
-    def __pos__(self):
+    def __pos__(self) -> 'Sym':
         return self
 
-    def __bool__(self):
+    def __bool__(self) -> NoReturn:
         raise TypeError('a symbolic lane has no truth value: only branch-free code can be traced')
 
-    def _compare(self, other):
+    def _compare(self, other: Lane) -> NoReturn:
         self.__bool__()
 
     __lt__ = __le__ = __gt__ = __ge__ = _compare
 
 
-def _unary(op, fold):
-    def apply(x):
+def _unary(op: str, fold: Callable[[float], float]) -> Any:
+    def apply(x: Lane) -> Lane:
         return fold(x) if _is_const(x) else x.graph.node(op, (x,))
     return staticmethod(apply)
 
 
-def _pick(op, fold):
+def _pick(op: str, fold: Callable[[Any, Any], Any]) -> Callable[[Lane, Lane], Lane]:
     """A NaN-keeping max or min of two lanes (spatial.larger, spatial.smaller)."""
-    def apply(a, b):
+    def apply(a: Lane, b: Lane) -> Lane:
         if _is_const(a) and _is_const(b):
             return fold(a, b)
         graph = (a if isinstance(a, Sym) else b).graph
@@ -184,7 +186,7 @@ class SymOps:
     recip = _unary('recip', lambda x: 1.0 / x if x != 0.0 else math.inf)
 
     @staticmethod
-    def maxabs(lanes):
+    def maxabs(lanes: Sequence[Lane]) -> Lane:
         """spatial.ScalarOps.maxabs, traced: abs and a NaN-keeping max, branch-free (a max
         with a constant 0.0 start is the other operand, an abs being at least 0 or NaN)."""
         out = 0.0
@@ -196,7 +198,7 @@ class SymOps:
         return out
 
     @staticmethod
-    def least(lanes):
+    def least(lanes: Sequence[Lane]) -> Lane:
         """spatial.ScalarOps.least, traced (every cosine is at most 1.0, the start)."""
         out = 1.0
         for x in lanes:
@@ -204,14 +206,14 @@ class SymOps:
         return out
 
 
-def leaves(value):
+def leaves(value: Any) -> list[Lane]:
     """The Syms and floats of a nested list/tuple structure, depth first."""
     if isinstance(value, (list, tuple)):
         return [x for item in value for x in leaves(item)]
     return [value]
 
 
-def live_operations(graph, outputs):
+def live_operations(graph: Graph, outputs: Sequence[Lane]) -> list[int]:
     """Node ids of the operations ``outputs`` depend on, in recording order (inputs excluded);
     what no output depends on is dropped."""
     live = [False] * len(graph.nodes)

@@ -245,7 +245,7 @@ def refusal(others, domain, during=False):
 def connect(player, recorder, namespace):
     """Wait until the player's setpoints reach the node and the node's efforts the
     recorder, both as far as matching can tell (see Recorder.answer_first for the rest)."""
-    if not player.wait_for_node(30.0):
+    if not player.wait_for_subscriber(30.0):
         raise RuntimeError(f'no cog_id_node subscribes to {namespace}/joint_setpoint')
     if not recorder.wait_matched([f'{namespace}/joint_effort'], 30.0):
         raise RuntimeError(f'the recorder does not receive {namespace}/joint_effort')

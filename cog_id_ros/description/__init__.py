@@ -9,6 +9,7 @@ format; this face reads the rest and hands the core its native form:
 - :mod:`.params_file`: ROS 2 parameter files, read as rcl reads them
 - :mod:`.urdf`: a URDF plus loop closures (docs/urdf.md), read with :mod:`.urdf_xml` (the
   text and its XML), :mod:`.urdf_tree` (links and joints), :mod:`.loop_closures`,
+  :mod:`.loop_closure_file` (the loop list of the Pinocchio ecosystem),
   :mod:`.frames` (roll-pitch-yaw) and :mod:`.rigid_bodies` (fixed joints welded)
 
 It imports from the core, never the reverse (test/test_architecture.py).

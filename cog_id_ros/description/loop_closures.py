@@ -6,8 +6,8 @@ import math
 from ..core import joints
 from ..core.errors import MechanismConfigError
 from ..core.joints import AXES_PERPENDICULAR
-from ..core.mechanism import MAX_COORDINATE, MAX_LENGTH, NAME_PATTERN, bounded
-from ..core.parameters import show
+from ..core.mechanism import MAX_COORDINATE, MAX_LENGTH, bounded, name_problem
+from ..core.parameters import show, split_owner
 from .frames import ZERO
 
 #: the keys of ``loop_closures.<name>.*``
@@ -15,11 +15,19 @@ CLOSURE_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xy
                 'child_rpy', 'axis', 'axis2')
 
 
-class _Closure:
+class Closure:
+    """A loop-closing joint: its name, kind (the native schema's type), the two URDF links
+    it joins, where it sits on each and its axes."""
+
     def __init__(self, name, kind, parent, child, offsets, axis, axis2):
         self.name, self.kind, self.parent, self.child = name, kind, parent, child
         self.offsets = offsets           # parent_xyz, parent_rpy, child_xyz, child_rpy
         self.axis, self.axis2 = axis, axis2
+
+    def error(self, key: str, message: str) -> MechanismConfigError:
+        """The error about its ``key``, naming where it was given (a loop-closure file's
+        closures name the file and the entry instead)."""
+        return MechanismConfigError(f'loop_closures.{self.name}.{key}', message)
 
 
 def read_closures(r, robot):
@@ -27,18 +35,14 @@ def read_closures(r, robot):
     checked against the links and joints of the URDF ``robot``."""
     names = r.string_list('mechanism.loop_closures') or []
     for name in names:
-        if not NAME_PATTERN.match(name):
-            raise MechanismConfigError(
-                'mechanism.loop_closures',
-                f"'{name}' is not a valid joint name: names become parts of ROS 2 parameter "
-                f"names (loop_closures.<name>.*, joints.<name>.*) and may hold only letters, "
-                f"digits and '_', not starting with a digit")
+        problem = name_problem(name)
+        if problem:
+            raise MechanismConfigError('mechanism.loop_closures', f'{name!r} {problem}')
         if name in robot.joints:
             raise MechanismConfigError(
                 'mechanism.loop_closures',
                 f"'{name}' is already a joint of the URDF (line {robot.joints[name].line}); "
                 f'give the loop closure a name of its own')
-    listed = set(names)
     for key in r.params:
         if key == 'loop_closures':
             value = r.params[key]
@@ -49,15 +53,15 @@ def read_closures(r, robot):
                      f'got {show(value)}')
         if not key.startswith('loop_closures.'):
             continue
-        parts = key.split('.', 2)
-        if parts[1] not in listed:
+        owner, rest = split_owner(key[len('loop_closures.'):], names)
+        if owner is None:
             raise MechanismConfigError(
-                key, f"'{parts[1]}' is not in mechanism.loop_closures "
+                key, f"'{rest.rsplit('.', 1)[0]}' is not in mechanism.loop_closures "
                      f"({', '.join(names) if names else 'none listed'}): list it there, or "
                      f'correct the name')
-        if len(parts) < 3 or parts[2] not in CLOSURE_KEYS:
+        if rest not in CLOSURE_KEYS:
             raise MechanismConfigError(
-                key, f"unknown parameter (loop_closures.{parts[1]}.* takes "
+                key, f"unknown parameter (loop_closures.{owner}.* takes "
                      f"{', '.join(CLOSURE_KEYS)})")
     return [_read_closure(r, robot, name) for name in names]
 
@@ -105,7 +109,7 @@ def _read_closure(r, robot, name):
     elif r.has(prefix + 'axis2'):
         raise MechanismConfigError(
             prefix + 'axis2', f'only universal closures have axis2, this one is {kind}')
-    return _Closure(name, kind, ends[0], ends[1], offsets, axis, axis2)
+    return Closure(name, kind, ends[0], ends[1], offsets, axis, axis2)
 
 
 def _axis(r, name, default):

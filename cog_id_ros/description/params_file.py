@@ -188,6 +188,29 @@ def check_rcl_values(document, path):
             problem = rcl_value_problem(value)
             if problem:
                 raise MechanismConfigError(name, f'{problem} (in {path})')
+        _check_dotted_mappings(params, '', path)
+
+
+def _check_dotted_mappings(tree, prefix, path):
+    """A key holding '.' whose value is a mapping, followed by another key of its mapping,
+    is refused: rcl's parameter-file parser then files the keys after it under a wrong
+    name (``links: {"link.one": {mass: 1.0}, link2: ...}`` gives ``links.link.link2.mass``;
+    checked with rcl, Jazzy). Its entries are written as flat keys instead."""
+    keys = list(tree)
+    for k, key in enumerate(keys):
+        value = tree[key]
+        if not isinstance(value, dict):
+            continue
+        if isinstance(key, str) and '.' in key and k + 1 < len(keys) and value:
+            first = next(iter(value))
+            raise MechanismConfigError(
+                f'{prefix}{key}',
+                f"the key {key!r} holds '.' and a mapping, and {keys[k + 1]!r} follows it: "
+                f"ROS 2's parameter-file parser would read {keys[k + 1]!r} as "
+                f"'{prefix}{key.rsplit('.', 1)[0]}.{keys[k + 1]}'. Write its entries as flat "
+                f'quoted keys instead, e.g. "{key}.{first}": ... (docs/mechanism.md, "Names '
+                f'of links and joints"; in {path})')
+        _check_dotted_mappings(value, f'{prefix}{key}.', path)
 
 
 def rcl_value_problem(value):

@@ -28,9 +28,11 @@ errors inside the URDF give its line and name the link or joint.
 """
 from ..core import joints
 from ..core.errors import MechanismConfigError
-from ..core.mechanism import NAME_PATTERN
+from ..core.mechanism import name_problem
 from ..core.parameters import ParameterReader, as_float, show
 from .frames import ZERO
+from .loop_closure_file import PARAMETER as LOOP_FILE
+from .loop_closure_file import apply_edits, file_closures, read_loop_file
 from .loop_closures import read_closures
 from .rigid_bodies import mass_properties, merge_fixed, six
 from .urdf_tree import Robot
@@ -38,7 +40,7 @@ from .urdf_xml import read_source
 
 #: parameters the URDF form consumes (everything else under mechanism.* passes through)
 _CONSUMED = ('robot_description', 'mechanism.urdf_file', 'mechanism.loop_closures',
-             'mechanism.base_link', 'mechanism.initial_positions')
+             'mechanism.base_link', 'mechanism.initial_positions', LOOP_FILE)
 
 
 def is_urdf(params: dict) -> bool:
@@ -52,16 +54,26 @@ def is_urdf(params: dict) -> bool:
     return isinstance(nested, dict) and 'urdf_file' in nested
 
 
-def native_parameters(params: dict, base_dir: 'str | None' = None) -> dict:
+def native_parameters(params: dict, base_dir: 'str | dict | None' = None) -> dict:
     """The native dotted-name parameters of the mechanism that ``params`` gives in the URDF
     form (docs/urdf.md).
 
     ``params`` holds dotted names (as rclpy gives them) or a nested dict; ``base_dir`` is
-    where a relative ``mechanism.urdf_file`` is looked for (the params file's directory;
-    default: the working directory). Every ``mechanism.*`` parameter that the URDF form does
-    not define passes through unchanged (``name``, ``gravity``, ``active_joints``,
-    ``torque_weights``, the tolerances), and so does every parameter outside the
-    mechanism's (a node's own). Raises MechanismConfigError naming the parameter."""
+    where a relative ``mechanism.urdf_file`` or ``mechanism.loop_closure_file`` is looked
+    for (the params file's directory; default: the working directory), or a dict of the
+    directory for each of them (the node's, whose params files may differ). Every
+    ``mechanism.*`` parameter that the URDF form does not define passes through unchanged
+    (``name``, ``gravity``, ``active_joints``, ``torque_weights``, the tolerances), and so
+    does every parameter outside the mechanism's (a node's own). Raises
+    MechanismConfigError naming the parameter."""
+    return read(params, base_dir)[0]
+
+
+def read(params: dict, base_dir: 'str | dict | None' = None) -> tuple:
+    """(native parameters, sources): :func:`native_parameters`, and where each of its
+    names was written, for :func:`.urdf_messages.for_urdf_user`: the URDF parameter
+    (``source``), the URDF line of each joint and link (``lines``) and the loop closures by
+    name (``closures``)."""
     if not isinstance(params, dict):
         raise MechanismConfigError('parameters', f'must be a dict, got {type(params).__name__}')
     r = ParameterReader(params)
@@ -78,12 +90,28 @@ def native_parameters(params: dict, base_dir: 'str | None' = None) -> dict:
                 name, 'links.* and joints.* are not read with a URDF (robot_description or '
                       "mechanism.urdf_file): give masses and inertias in the URDF's "
                       '<inertial>, joints in the URDF or under loop_closures.<name>')
-    source = read_source(r, base_dir)
+    source = read_source(r, _directory(base_dir, 'mechanism.urdf_file'))
     robot = Robot(source)
+    loop_file = read_loop_file(r, _directory(base_dir, LOOP_FILE))
     closures = read_closures(r, robot)
+    if loop_file is not None:
+        # frames as the file names them: links, and joints (each its child link's frame)
+        frames = {joint.name: joint.child for joint in robot.joints.values()}
+        frames.update({name: name for name in robot.links})
+        apply_edits(robot, loop_file)
+        taken = {closure.name for closure in closures} | set(robot.joints)
+        closures += file_closures(robot, loop_file, frames, taken)
     base = _choose_base(r, robot)
     bodies = merge_fixed(robot, base)
-    return _native(r, robot, closures, base, bodies)
+    lines = {name: link.line for name, link in robot.links.items()}
+    lines.update({name: joint.line for name, joint in robot.joints.items()})
+    sources = {'source': source.parameter, 'lines': lines,
+               'closures': {closure.name: closure for closure in closures}}
+    return _native(r, robot, closures, base, bodies, loop_file), sources
+
+
+def _directory(base_dir: 'str | dict | None', parameter: str) -> 'str | None':
+    return base_dir.get(parameter) if isinstance(base_dir, dict) else base_dir
 
 
 def _choose_base(r, robot):
@@ -97,7 +125,7 @@ def _choose_base(r, robot):
     return base
 
 
-def _native(r, robot, closures, base, bodies):
+def _native(r, robot, closures, base, bodies, loop_file):
     out = {}
     for name, value in r.params.items():
         if name in _CONSUMED or name == 'loop_closures' or name.startswith(
@@ -118,9 +146,9 @@ def _native(r, robot, closures, base, bodies):
         _check_name(robot, joint, 'joint')
     out['mechanism.links'] = links
     out['mechanism.joints'] = [j.name for j in tree_joints] + [c.name for c in closures]
-    coordinates = [j.name for j in tree_joints] + [
+    coordinates = [j.name for j in tree_joints if j.joint_kind.has_coordinate] + [
         c.name for c in closures if joints.kind(c.kind).has_coordinate]
-    _check_active(r, robot, closures)
+    _active(r, robot, closures, loop_file, out)
     out['mechanism.initial_positions'] = _initial_positions(r, robot, closures, coordinates)
     for name in links:
         mass, com, inertia = mass_properties(bodies, name)
@@ -140,8 +168,8 @@ def _native(r, robot, closures, base, bodies):
                 out[prefix + 'effort'] = effort
     for closure in closures:
         if bodies.body[closure.parent] == bodies.body[closure.child]:
-            raise MechanismConfigError(
-                f'loop_closures.{closure.name}.child',
+            raise closure.error(
+                'child',
                 f"links '{closure.parent}' and '{closure.child}' are already rigidly connected "
                 f"(fixed joints weld them into one body, '{bodies.body[closure.child]}'): a "
                 f'loop closure must join two links that can move relative to each other')
@@ -167,34 +195,54 @@ def _native_joint(out, bodies, name, kind, parent, child, offsets, axis):
 
 
 def _check_name(robot, item, kind):
-    if NAME_PATTERN.match(item.name):
-        return
-    raise robot.error(
-        item.line, f"{kind} name '{item.name}' may hold only letters, digits and '_', not "
-                   f"starting with a digit: names of links and joints become parts of ROS 2 "
-                   f"parameter names ({kind}s.<name>.*); rename it in the URDF (links "
-                   f"welded to another by a fixed joint, fixed joints and the base link are "
-                   f"exempt)")
+    problem = name_problem(item.name)
+    if problem:
+        raise robot.error(item.line, f'{kind} name {item.name!r} {problem}; rename it in the '
+                                     f'URDF')
 
 
-def _check_active(r, robot, closures):
+def _active(r: ParameterReader, robot: Robot, closures: list, loop_file, out: dict) -> None:
+    """Check the active joints: ``mechanism.active_joints``, else the file's ``name_mot``
+    (then written to ``out``)."""
     active = r.string_list('mechanism.active_joints')
+    if active is None and loop_file is not None and not loop_file.motors:
+        raise MechanismConfigError(
+            'mechanism.active_joints', f'missing: give it, or the actuated joints as name_mot '
+                                       f'in {LOOP_FILE} ({loop_file.path})')
+    if active is not None or loop_file is None:
+        _check_active(active or (), robot, closures,
+                      lambda k, message: MechanismConfigError('mechanism.active_joints',
+                                                              message))
+        return
+    _check_active(loop_file.motors, robot, closures,
+                  lambda k, message: loop_file.error('name_mot', k, message))
+    out['mechanism.active_joints'] = list(loop_file.motors)
+
+
+def _check_active(active: list, robot: Robot, closures: list, error) -> None:
     kinds = {c.name: c.kind for c in closures}
-    for name in active or ():
-        if name in robot.joints and robot.joints[name].welds:
-            raise MechanismConfigError(
-                'mechanism.active_joints',
-                f"'{name}' is a fixed joint of the URDF (line {robot.joints[name].line}): it "
-                f'welds two links together and cannot be driven')
+    for k, name in enumerate(active):
+        joint = robot.joints.get(name)
+        if joint is not None and joint.welds:
+            raise error(k, f"'{name}' is a fixed joint of the URDF (line {joint.line}): it "
+                           f'welds two links together and cannot be driven')
+        if joint is not None and not joint.joint_kind.has_coordinate:
+            raise error(k, f"'{name}' is a {joint.kind} joint (made so by "
+                           f'{LOOP_FILE}): spherical joints are passive (only revolute and '
+                           f'prismatic joints can be driven)')
         if name in kinds and not joints.kind(kinds[name]).has_coordinate:
-            raise MechanismConfigError(
-                'mechanism.active_joints',
-                f"'{name}' is a {kinds[name]} loop closure: spherical, universal and fixed "
-                f'joints are passive (only revolute and prismatic joints can be driven)')
-        if name not in robot.joints and name not in kinds:
-            raise MechanismConfigError(
-                'mechanism.active_joints',
-                f"'{name}' is neither a joint of the URDF nor in mechanism.loop_closures")
+            raise error(k, f"'{name}' is a {kinds[name]} loop closure: spherical, universal "
+                           f'and fixed joints are passive (only revolute and prismatic joints '
+                           f'can be driven)')
+        if joint is None and name not in kinds:
+            raise error(k, f"'{name}' is neither a joint of the URDF nor in "
+                           f'mechanism.loop_closures' + _edited(robot, name))
+
+
+def _edited(robot: Robot, name: str) -> str:
+    """Where a joint name the URDF had went: the two joints of its UJOINT edit."""
+    split = robot.renamed.get(name)
+    return f" (the UJOINT edit of {LOOP_FILE} made it {' and '.join(split)})" if split else ''
 
 
 def _initial_positions(r, robot, closures, coordinates):
@@ -216,8 +264,11 @@ def _initial_positions(r, robot, closures, coordinates):
         name = key[len(prefix) + 1:]
         value = as_float(key, r.raw(key, required=True))
         if name not in coordinates:
-            if name in robot.joints:
-                why = f'a fixed joint of the URDF (line {robot.joints[name].line})'
+            joint = robot.joints.get(name)
+            if joint is not None and joint.welds:
+                why = f'a fixed joint of the URDF (line {joint.line})'
+            elif joint is not None:
+                why = f'a {joint.kind} joint (made so by {LOOP_FILE})'
             elif name in kinds:
                 why = f'a {kinds[name]} loop closure'
             else:
@@ -225,6 +276,6 @@ def _initial_positions(r, robot, closures, coordinates):
             raise MechanismConfigError(
                 key, f"'{name}' is {why}: it has no position" if why else
                      f"'{name}' is neither a revolute or prismatic joint of the URDF nor in "
-                     f"mechanism.loop_closures")
+                     f"mechanism.loop_closures" + _edited(robot, name))
         given[name] = value
     return [given.get(name, 0.0) for name in coordinates]

@@ -65,6 +65,8 @@ class Robot:
         self.name = root.attrib.get('name') or None
         self.links = {}      # name -> _Link, in document order
         self.joints = {}     # name -> _Joint, in document order
+        #: URDF joint name -> the two joints a loop-closure file's UJOINT edit made of it
+        self.renamed = {}
         for element in root.children:
             if element.tag == 'link':
                 link = self._link(element)

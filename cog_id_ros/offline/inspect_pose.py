@@ -15,7 +15,8 @@ TINY = 1e-12
 
 def joint_rows(mech):
     """Per joint with a coordinate: (name, type, role, given, assembled, unit, warning or
-    None); role is 'active', 'active, redundant' or 'passive' (', closes loop k' added)."""
+    None); role is 'active', 'active, redundant', 'locked' or 'passive' (', closes loop k'
+    added)."""
     closing = {lp.joint: k for k, lp in enumerate(mech.model.loops, start=1)
                if lp.joint is not None}
     primary = set(mech.primary_joints)
@@ -32,6 +33,8 @@ def joint_rows(mech):
                 warning = (f"active joint '{name}' moved from {given:.9g} to {assembled:.9g} "
                            f'{unit} (by {moved:.3g}) to close the loops: its initial_positions '
                            f'entry disagrees with the loop closure')
+        elif j in mech.locked_index:
+            role = 'locked'
         else:
             role = 'passive'
             limit, _ = mech.far_move_limit(j)

@@ -190,6 +190,11 @@ def format_actuation(mech):
     else:
         lines = [f'degrees of freedom: {mech.dof} ({coordinates} joint coordinates - closure '
                  f'rank {mech.closure_rank})']
+    if mech.locked_joints:
+        lines[0] = lines[0][:-1] + (f', {len(mech.locked_joints)} of it the locked joints)')
+        lines += textwrap.wrap(f"locked joints (held at their initial positions): "
+                               f"{', '.join(mech.locked_joints)}", WIDTH,
+                               initial_indent='  ', subsequent_indent='    ')
     lines += format_spherical_chains(mech)
     if mech.is_redundant:
         lines.append(f'active joints: {n_active} for {mech.dof} DOF (redundant); the torques '

@@ -338,7 +338,8 @@ def format_efforts(time: np.ndarray, efforts: np.ndarray, valid: np.ndarray,
     time = np.asarray(time, dtype=float)
     efforts = np.asarray(efforts, dtype=float).reshape(time.size, -1)
     valid = np.ones(time.size, bool) if valid is None else np.asarray(valid, bool)
-    yield ','.join([TIME] + [joint_column(j, EFFORT) for j in active_joints]) + '\n'
+    yield ','.join(_csv_cell(cell) for cell in
+                   [TIME] + [joint_column(j, EFFORT) for j in active_joints]) + '\n'
     for start in range(0, time.size, block):
         stop = min(start + block, time.size)
         ok = valid[start:stop]
@@ -350,6 +351,14 @@ def format_efforts(time: np.ndarray, efforts: np.ndarray, valid: np.ndarray,
                     cells[i] = ''
             cols.append(cells)
         yield '\n'.join(map(','.join, zip(*cols))) + '\n'
+
+
+def _csv_cell(text: str) -> str:
+    """A header cell as CSV writes it: a joint name with ',', '"', a line break or spaces
+    at its ends quoted (any name is a joint's: docs/mechanism.md), others as they are."""
+    if any(c in text for c in ',"\r\n') or text != text.strip():
+        return '"' + text.replace('"', '""') + '"'
+    return text
 
 
 def write_efforts(path: PathLike, time: np.ndarray, efforts: np.ndarray, valid: np.ndarray,

@@ -27,6 +27,7 @@ out of scope: the node's commands never have one.
 """
 import functools
 import struct
+from typing import Callable, Sequence
 
 #: encapsulation header of plain CDR, little-endian
 CDR_LE = b'\x00\x01\x00\x00'
@@ -35,12 +36,12 @@ CDR_LE = b'\x00\x01\x00\x00'
 PREFIX_SIZE = 20
 
 
-def float64_multiarray(data):
+def float64_multiarray(data: Sequence[float]) -> bytes:
     """The serialized Float64MultiArray with ``data`` (floats; no layout dimensions)."""
     return float64_multiarray_packer(len(data))(*data)
 
 
-def float64_multiarray_packer(n):
+def float64_multiarray_packer(n: int) -> Callable[..., bytes]:
     """``pack(*values) -> bytes``: the serialized Float64MultiArray of exactly ``n`` floats
     (one C call, for a hot path that always sends ``n``; ``struct.error`` for another n)."""
     return functools.partial(struct.Struct(f'<4sIII4x{n}d').pack, CDR_LE, 0, 0, n)

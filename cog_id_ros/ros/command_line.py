@@ -12,7 +12,7 @@ import os
 import re
 import sys
 import tempfile
-from typing import Any, Sequence
+from typing import Any, Literal, Sequence
 
 import yaml
 
@@ -39,7 +39,9 @@ def wants_help(argv: Sequence[str]) -> bool:
 def split_ros_arguments(argv: Sequence[str]) -> tuple[list[str], list[str]]:
     """(ROS arguments, the others): the ROS ones are those after a ``--ros-args`` up to
     the next ``--`` or the end (rcl's rule; there may be several such sections)."""
-    ros, other, inside = [], [], False
+    ros: list[str] = []
+    other: list[str] = []
+    inside = False
     for arg in argv:
         if arg == '--ros-args':
             inside = True
@@ -91,23 +93,25 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
     return None
 
 
-def urdf_base_dir(command_line: Sequence[str] | None, node_name: str) -> str | None:
-    """The directory a relative ``mechanism.urdf_file`` is relative to: that of the
-    ``--params-file`` that gives it to the node called ``node_name`` (rcl applies the files
-    and ``-p`` rules in their order on the command line: the last one that gives it counts);
-    None (the working directory) when a ``-p`` rule gives it, or nothing does."""
+def urdf_base_dir(command_line: Sequence[str] | None, node_name: str,
+                  parameter: str = 'mechanism.urdf_file') -> str | None:
+    """The directory a relative ``mechanism.urdf_file`` (or another file parameter,
+    ``mechanism.loop_closure_file``) is relative to: that of the ``--params-file`` that
+    gives it to the node called ``node_name`` (rcl applies the files and ``-p`` rules in
+    their order on the command line: the last one that gives it counts); None (the working
+    directory) when a ``-p`` rule gives it, or nothing does."""
     base = None
     args = list(command_line or ())
     for arg, value in zip(args, args[1:]):
         if arg == '--params-file':
             try:
-                given = 'mechanism.urdf_file' in params_file.load_params_file(value, node_name)
+                given = parameter in params_file.load_params_file(value, node_name)
             except MechanismConfigError:
                 given = False
             if given:
                 base = os.path.dirname(os.path.abspath(value))
         elif arg in ('-p', '--param') and \
-                value.split(':=', 1)[0].rsplit(':', 1)[-1] == 'mechanism.urdf_file':
+                value.split(':=', 1)[0].rsplit(':', 1)[-1] == parameter:
             base = None
     return base
 
@@ -171,7 +175,7 @@ class StderrHeld:
             self._saved = None
         return self
 
-    def __exit__(self, *exc_info: Any) -> bool:
+    def __exit__(self, *exc_info: Any) -> Literal[False]:
         if self._saved is not None:
             os.dup2(self._saved, 2)
             os.close(self._saved)

@@ -75,4 +75,6 @@ def start_up_summary(mechanism: Any, config: NodeConfig) -> str:
             f'({config.timeout_behavior})'
             + (f'; {len(mechanism.spherical_chains)} chains of three revolute joints through '
                f'massless links solved as spherical joints' if mechanism.spherical_chains
-               else ''))
+               else '')
+            + (f"; locked joints (held at their initial positions): "
+               f"{', '.join(mechanism.locked_joints)}" if mechanism.locked_joints else ''))

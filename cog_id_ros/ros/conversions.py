@@ -6,6 +6,7 @@ node counts in diagnostics) and a sentence for the log.
 """
 import math
 import struct
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -14,6 +15,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ..offline import derivatives
 from . import cdr
 from .setpoint_filter import NANOSECONDS
+
+if TYPE_CHECKING:
+    from ..core import InverseDynamics
 
 #: every reason a setpoint or trajectory can be rejected for, as counted in diagnostics
 REASONS = {
@@ -51,13 +55,16 @@ _CORE_REASONS = ('malformed', 'non_finite', 'out_of_range', 'limit', 'closure', 
 class Rejected(ValueError):
     """A setpoint or trajectory that gets no command: ``reason`` is a key of REASONS."""
 
-    def __init__(self, reason, message):
+    #: the trajectory's number of points, where a trajectory is refused
+    points: int
+
+    def __init__(self, reason: str, message: str) -> None:
         assert reason in REASONS or reason in TRAJECTORY_REASONS, reason
         self.reason = reason
         super().__init__(message)
 
 
-def rejection(exc, redundant=None):
+def rejection(exc: BaseException | None, redundant: object = None) -> Rejected:
     """The Rejected for a core exception, by its machine-readable ``reason``.
 
     Every reason of the core's errors (cog_id_ros.core.errors.REASONS) is a reason here
@@ -70,12 +77,12 @@ def rejection(exc, redundant=None):
     return Rejected(reason, str(exc))
 
 
-def stamp_to_ns(stamp):
+def stamp_to_ns(stamp: Any) -> int:
     """A builtin_interfaces/Time as integer nanoseconds."""
     return stamp.sec * NANOSECONDS + stamp.nanosec
 
 
-def duration_to_s(duration):
+def duration_to_s(duration: Any) -> float:
     return duration.sec + duration.nanosec * 1e-9
 
 
@@ -86,11 +93,11 @@ class JointSelector:
     stream that always sends the same names pays for one dict lookup.
     """
 
-    def __init__(self, active_joints):
+    def __init__(self, active_joints: Sequence[str]) -> None:
         self.active_joints = list(active_joints)
-        self._cache = {}
+        self._cache: dict[tuple[str, ...], list[int] | Rejected] = {}
 
-    def indices(self, names):
+    def indices(self, names: Sequence[str]) -> list[int]:
         """Indices of the active joints in ``names``; raises Rejected."""
         key = tuple(names)
         found = self._cache.get(key)
@@ -103,10 +110,10 @@ class JointSelector:
             raise found
         return found
 
-    def _lookup(self, names):
+    def _lookup(self, names: Sequence[str]) -> list[int] | Rejected:
         if not names:
             return Rejected('empty', 'no joint names')
-        where = {}
+        where: dict[str, int] = {}
         for i, name in enumerate(names):
             if name in where:
                 return Rejected('malformed', f"joint '{name}' appears twice")
@@ -119,7 +126,7 @@ class JointSelector:
         return [where[j] for j in self.active_joints]
 
 
-def _pick(values, index, what):
+def _pick(values: Sequence[float], index: Sequence[int], what: str) -> list[float]:
     """The active entries of a message array as floats; Rejected for NaN or infinity."""
     out = [values[i] for i in index]
     if not all(map(math.isfinite, out)):
@@ -128,7 +135,8 @@ def _pick(values, index, what):
     return out
 
 
-def setpoint_arrays(msg, selector):
+def setpoint_arrays(msg: JointState,
+                    selector: JointSelector) -> tuple[list[float], list[float] | None]:
     """(positions, velocities or None) of the active joints of a JointState setpoint.
 
     Positions are required; velocities are optional (an empty array); efforts are ignored
@@ -149,7 +157,10 @@ def setpoint_arrays(msg, selector):
     return q, v
 
 
-def trajectory_arrays(msg, selector, unwrap=None, max_step=None):
+def trajectory_arrays(msg: JointTrajectory, selector: JointSelector,
+                      unwrap: Sequence[bool] | None = None,
+                      max_step: Sequence[float] | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(time_from_start (N,), q (N, M), qd (N, M), qdd (N, M)) of a JointTrajectory.
 
     Every point needs positions; velocities and accelerations are either on every point
@@ -168,7 +179,7 @@ def trajectory_arrays(msg, selector, unwrap=None, max_step=None):
     index = selector.indices(msg.joint_names)
     n_names = len(msg.joint_names)
     times = np.array([duration_to_s(p.time_from_start) for p in points])
-    fields = {}
+    fields: dict[str, Any] = {}         # positions, and velocities and accelerations or None
     for field in ('positions', 'velocities', 'accelerations'):
         sizes = {len(getattr(p, field)) for p in points}
         if sizes == {0} and field != 'positions':
@@ -203,7 +214,7 @@ def trajectory_arrays(msg, selector, unwrap=None, max_step=None):
     return times, q, qd, qdd
 
 
-def unwrapped_columns(q, unwrap):
+def unwrapped_columns(q: np.ndarray, unwrap: Sequence[bool] | None) -> np.ndarray:
     """``q`` (N, M) with the columns flagged in ``unwrap`` unwrapped (a copy), else ``q``."""
     if unwrap is None or not any(unwrap) or len(q) < 2:
         return q
@@ -213,7 +224,7 @@ def unwrapped_columns(q, unwrap):
     return out
 
 
-def clip_efforts(tau, limits):
+def clip_efforts(tau: np.ndarray, limits: np.ndarray) -> bool:
     """Clip efforts ``tau`` (an array of any shape, in place) to +-``limits`` (one per
     active joint, the last axis); True if any was clipped. The node's one clip: setpoints,
     the hold command and trajectories."""
@@ -223,13 +234,13 @@ def clip_efforts(tau, limits):
     return True
 
 
-def nearest_turn(value, reference):
+def nearest_turn(value: float, reference: float) -> float:
     """``value`` plus the multiple of 2 pi that brings it nearest ``reference``."""
     turns = round((reference - value) / (2.0 * math.pi))
     return value + turns * 2.0 * math.pi if turns else value
 
 
-def trajectory_point_count(raw):
+def trajectory_point_count(raw: bytes) -> int | None:
     """Number of points of a serialized (CDR) JointTrajectory, read from its header alone.
 
     Cheap (no deserialisation), so a trajectory too long to solve can be refused before it
@@ -242,7 +253,7 @@ def trajectory_point_count(raw):
         body = memoryview(raw)[4:]
         pos = 8                                          # stamp: int32 sec, uint32 nanosec
 
-        def u32(at):
+        def u32(at: int) -> tuple[int, int]:
             at = (at + 3) & ~3
             return struct.unpack_from(order + 'I', body, at)[0], at + 4
 
@@ -260,8 +271,11 @@ def trajectory_point_count(raw):
         return None
 
 
-def solve_trajectory_message(raw, solver, selector, *, unwrap=None, max_step=None,
-                             effort_limits=None, max_points=None):
+def solve_trajectory_message(raw: bytes, solver: 'InverseDynamics', selector: JointSelector, *,
+                             unwrap: Sequence[bool] | None = None,
+                             max_step: Sequence[float] | None = None,
+                             effort_limits: Sequence[float] | None = None,
+                             max_points: int | None = None) -> tuple[bytes, bool, int]:
     """A serialized JointTrajectory -> (serialized effort_trajectory, clipped, points).
 
     The whole trajectory path of the node, run in its trajectory process
@@ -303,7 +317,8 @@ def solve_trajectory_message(raw, solver, selector, *, unwrap=None, max_step=Non
     return serialize_message(out), clipped, points
 
 
-def effort_trajectory(msg, active_joints, q, qd, qdd, tau):
+def effort_trajectory(msg: JointTrajectory, active_joints: Sequence[str], q: np.ndarray,
+                      qd: np.ndarray, qdd: np.ndarray, tau: np.ndarray) -> JointTrajectory:
     """The received trajectory's points, active joints only, with ``effort`` filled."""
     out = JointTrajectory()
     out.header = msg.header
@@ -322,19 +337,20 @@ class EffortMessages:
     ``joints``: every joint of the mechanism, the names of ``joint_states``.
     """
 
-    def __init__(self, active_joints, joints=()):
+    def __init__(self, active_joints: Sequence[str], joints: Sequence[str] = ()) -> None:
         self._pack_command = cdr.float64_multiarray_packer(len(active_joints))
         self.state = JointState()
         self.state.name = list(active_joints)
         self.pose = JointState()
         self.pose.name = list(joints)
 
-    def command_for(self, efforts):
+    def command_for(self, efforts: Sequence[float]) -> bytes:
         """effort_command for one setpoint (one float per active joint), serialized: a
         Float64MultiArray for subscribers, without rclpy's conversion of a Python message."""
         return self._pack_command(*efforts)
 
-    def state_for(self, header, positions, velocities, efforts):
+    def state_for(self, header: Any, positions: list[float], velocities: list[float],
+                  efforts: list[float]) -> JointState:
         """joint_effort for one setpoint (lists of floats)."""
         state = self.state
         state.header = header
@@ -343,7 +359,8 @@ class EffortMessages:
         state.effort = efforts
         return state
 
-    def pose_for(self, frame_id, stamp_ns, positions, velocities):
+    def pose_for(self, frame_id: str, stamp_ns: int, positions: list[float],
+                 velocities: list[float]) -> JointState:
         """joint_states for one setpoint: every joint's position and velocity (lists of
         floats; velocities may be empty), stamped ``stamp_ns``."""
         pose = self.pose

@@ -67,7 +67,7 @@ def guarded(method: Callable) -> Callable:
     """A callback of a node that never ends it: an exception is counted and logged
     (``node.internal_error(name, exc)``)."""
     @functools.wraps(method)
-    def guarded(self, *args):
+    def guarded(self: Any, *args: Any) -> Any:
         try:
             return method(self, *args)
         except Exception as exc:   # noqa: BLE001 (no callback may end the node)

@@ -84,8 +84,9 @@ class CogIdNode(ReadOnlyNode):
     def _build(self, command_line: Sequence[str] | None,
                interruptible: Callable[[], ContextManager]) -> None:
         overrides = self.override_values()
-        base_dir = urdf_base_dir(command_line, self.get_name()) \
-            if 'mechanism.urdf_file' in overrides else None
+        base_dir = {name: urdf_base_dir(command_line, self.get_name(), name)
+                    for name in ('mechanism.urdf_file', 'mechanism.loop_closure_file')
+                    if name in overrides}
         with interruptible():
             self.mechanism = Mechanism.from_parameters(self.declare_given(
                 overrides, is_mechanism_parameter, 'mechanism (read at start-up)'),
@@ -261,7 +262,9 @@ class CogIdNode(ReadOnlyNode):
             q, qdot = self.solver.last_pose(rates)
         except CogIdError:      # rates too large for the joint rates: positions alone
             q, qdot = self.solver.last_pose()[0], []
-        self.joint_states_pub.publish(self.outputs.pose_for(frame_id, stamp, q, qdot))
+        # (called where joint_states_pub is not None; qdot: rates were given)
+        self.joint_states_pub.publish(  # type: ignore[union-attr]
+            self.outputs.pose_for(frame_id, stamp, q, qdot))  # type: ignore[arg-type]
 
     def clip(self, tau: np.ndarray) -> bool:
         """Clip efforts (an array, in place) to +-effort_limits; count it; True if clipped."""
@@ -297,7 +300,8 @@ class CogIdNode(ReadOnlyNode):
             what = 'zero efforts published'
         else:
             try:
-                tau = self.mode.hold(self.setpoints.last_pose)
+                # (a stream that stopped had a setpoint accepted: last_pose is set)
+                tau = self.mode.hold(self.setpoints.last_pose)  # type: ignore[arg-type]
             except CogIdError as exc:   # cannot happen for a pose just served; be safe
                 self.get_logger().error(f'cannot compute holding efforts: {exc}')
                 return

@@ -15,7 +15,7 @@ import argparse
 import dataclasses
 import math
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, NoReturn, Sequence
 
 from ..core import MechanismConfigError, joints
 from ..core.kernels import BACKENDS
@@ -74,7 +74,7 @@ class NodeParameter:
         naming the parameter when it cannot be honoured."""
         return _CHECKS[self.kind](self, value, list(active_types))
 
-    def fail(self, message: str):
+    def fail(self, message: str) -> NoReturn:
         raise MechanismConfigError(self.name, message)
 
     @property
@@ -110,21 +110,21 @@ class NodeParameter:
         return repr(self.default)
 
 
-def _plain(x):
+def _plain(x: float) -> str:
     return '.inf' if x == math.inf else f'{x:g}'
 
 
-def _number(x):
+def _number(x: float) -> str:
     return '`.inf`' if x == math.inf else f'{x:g}'
 
 
-def _as_number(param, v):
+def _as_number(param: NodeParameter, v: Any) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         param.fail(f'must be a number, got {v!r}')
     return float(v)
 
 
-def _check_number(param, value, active_types):
+def _check_number(param: NodeParameter, value: Any, active_types: list[str]) -> float:
     value = _as_number(param, value)
     if param.special is not None and value == param.special[0]:
         return value
@@ -137,30 +137,33 @@ def _check_number(param, value, active_types):
     return value
 
 
-def _check_integer(param, value, active_types):
-    low, high = param.low, param.high
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+def _check_integer(param: NodeParameter, value: Any, active_types: list[str]) -> int:
+    low, high = param.low, param.high       # (an integer parameter has both bounds)
+    if isinstance(value, bool) or not isinstance(value, int) or \
+            not low <= value <= high:  # type: ignore[operator]
         param.fail(f'must be an integer from {low} to {high}, got {value!r}')
     return value
 
 
-def _check_choice(param, value, active_types):
+def _check_choice(param: NodeParameter, value: Any, active_types: list[str]) -> str:
     if value not in param.choices:
         param.fail(f"must be one of {', '.join(param.choices)}, got {value!r}")
     return value
 
 
-def _check_bool(param, value, active_types):
+def _check_bool(param: NodeParameter, value: Any, active_types: list[str]) -> bool:
     if not isinstance(value, bool):
         param.fail(f'must be true or false, got {value!r}')
     return value
 
 
-def _check_per_joint(param, value, active_types):
+def _check_per_joint(param: NodeParameter, value: Any, active_types: list[str]) -> Any:
     import numpy as np
     n_act = len(active_types)
     if value is None or (isinstance(value, (list, tuple)) and len(value) == 0):
-        return np.array([param.per_joint_default(t) for t in active_types], dtype=float)
+        # (a per_joint parameter has its per_joint_default)
+        return np.array([param.per_joint_default(t)  # type: ignore[misc]
+                         for t in active_types], dtype=float)
     if not isinstance(value, (list, tuple)):
         value = [value]
     limits = [_as_number(param, v) for v in value]
@@ -233,7 +236,8 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'a stream is taken as received. false: positions are used as received'),
     NodeParameter(
         'max_setpoint_step', 'double[]', None, 'per_joint', what='step',
-        per_joint_default=lambda joint_type: DEFAULT_MAX_STEP[joints.kind(joint_type).unit],
+        # (an active joint's type: a registered kind, with a unit)
+        per_joint_default=lambda joint_type: DEFAULT_MAX_STEP[joints.kind(joint_type).unit],  # type: ignore[union-attr, index]
         default_text=f'{DEFAULT_MAX_STEP["rad"]!r} rad revolute, '
                      f'{DEFAULT_MAX_STEP["m"]!r} m prismatic',
         description='rad or m: within a stream, a setpoint that moves an active joint farther '
@@ -299,10 +303,12 @@ OTHER_PARAMETERS = (
     ('`mechanism.*`, `links.*`, `joints.*`', '', '', '',
      'the mechanism (docs/parameter_file.md)'),
     ('`robot_description`, `mechanism.urdf_file`, `mechanism.loop_closures`, '
-     '`loop_closures.*`, `mechanism.initial_positions.<joint>`', '', '', '',
+     '`loop_closures.*`, `mechanism.loop_closure_file`, `mechanism.initial_positions.<joint>`',
+     '', '', '',
      "the mechanism in the URDF form instead (docs/urdf.md): the URDF as a string (ROS's "
      'standard parameter) or a file (relative to the params file that gives it), the joints '
-     'that close its loops, and the assembly mode by joint name'),
+     'that close its loops, or the loop list published with it for Pinocchio (a file, '
+     'relative to the params file that gives it), and the assembly mode by joint name'),
     ('`use_sim_time`', 'bool', '`false`', 'true, false',
      "rclpy's: the node's clock from `/clock` (stamps of zero, `max_stamp_lead`, the stamp "
      'of `/diagnostics`); read-only like the rest'),

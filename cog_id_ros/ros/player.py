@@ -31,6 +31,7 @@ no effort at all; 2 bad arguments or CSV; 3 setpoints unanswered or unrecorded (
 import argparse
 import sys
 import time
+from typing import Any, Iterable
 
 import numpy as np
 import rclpy
@@ -69,8 +70,9 @@ class Player(Node):
     :class:`cog_id_ros.ros.recorder.Recorder`, in a process of its own.
     """
 
-    def __init__(self, joints, topic='joint_setpoint', node_name='cog_id_player', depth=None,
-                 **kwargs):
+    def __init__(self, joints: Iterable[str], topic: str = 'joint_setpoint',
+                 node_name: str = 'cog_id_player', depth: int | None = None,
+                 **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         self.joints = list(joints)
         qos = control_qos()
@@ -80,13 +82,13 @@ class Player(Node):
         self._spinner = SingleThreadedExecutor(context=self.context)
         self._spinner.add_node(self)
 
-    def spin_for(self, seconds):
+    def spin_for(self, seconds: float) -> None:
         """Handle incoming messages for ``seconds`` of wall time."""
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
             self._spinner.spin_once(timeout_sec=left)
 
-    def wait_for_node(self, timeout=10.0):
+    def wait_for_subscriber(self, timeout: float = 10.0) -> bool:
         """Wait until the setpoint topic has a matched subscriber."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
@@ -96,7 +98,8 @@ class Player(Node):
             self._spinner.spin_once(timeout_sec=0.02)
         return False
 
-    def play(self, times, positions, velocities=None, start_ns=None, pace=1.0):
+    def play(self, times: Any, positions: Any, velocities: Any = None, start_ns: int | None = None,
+             pace: float = 1.0) -> list[int]:
         """Publish one setpoint per row at its time; returns the stamps (ns) used.
 
         ``times`` (N,) seconds, ``positions`` and ``velocities`` (N, n_joints).
@@ -125,7 +128,7 @@ class Player(Node):
             self.publisher.publish(msg)
         return stamps
 
-    def wait_delivered(self, timeout=10.0):
+    def wait_delivered(self, timeout: float = 10.0) -> bool:
         """True once every matched subscriber acknowledged every setpoint published.
 
         Call it before destroying the player: a reliable writer destroyed right after its
@@ -135,8 +138,10 @@ class Player(Node):
         return self.publisher.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))
 
 
-def play_recorded(player, recorder, effort_topic, status, times, positions, velocities=None,
-                  where=None):
+def play_recorded(player: Player, recorder: recording.Recorder, effort_topic: str, status: str,
+                  times: np.ndarray, positions: np.ndarray, velocities: np.ndarray | None = None,
+                  where: str | None = None
+                  ) -> tuple[list[int], recording.Account, recording.Received]:
     """Play a run into the node and record its answers: returns ``(stamps, account,
     received)`` (see :meth:`Recorder.settle`; ``where`` names the node in the account,
     default ``effort_topic``).
@@ -163,7 +168,7 @@ def play_recorded(player, recorder, effort_topic, status, times, positions, velo
     return stamps, result, received
 
 
-def joints_of(path):
+def joints_of(path: str) -> list[str]:
     """Joint names of a trajectory CSV: every ``<joint>.position`` column, in file order."""
     with open(path, encoding='utf-8-sig') as f:
         header = f.readline()
@@ -171,7 +176,7 @@ def joints_of(path):
     return [c[:-len('.position')] for c in names if c.endswith('.position')]
 
 
-def load_csv(path):
+def load_csv(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, list[str]]:
     """(times, positions (N, J), velocities (N, J) or None, joints) of a trajectory CSV."""
     joints = joints_of(path)
     if not joints:
@@ -185,7 +190,8 @@ def load_csv(path):
     return traj.time, q, qd, joints
 
 
-def resample(times, positions, velocities, rate):
+def resample(times: np.ndarray, positions: np.ndarray, velocities: np.ndarray | None,
+             rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The trajectory at ``rate`` Hz from its first to its last time (cubic splines)."""
     from scipy.interpolate import CubicSpline
     new = times[0] + np.arange(int(np.floor((times[-1] - times[0]) * rate + 1e-9)) + 1) / rate
@@ -194,7 +200,7 @@ def resample(times, positions, velocities, rate):
     return new, q, qd
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog='cog_id_player',
         description='Play a CSV trajectory into joint_setpoint (sensor_msgs/JointState) and '
@@ -237,11 +243,11 @@ def main(argv: list[str] | None = None) -> int:
     # the whole file in the writer's history (see Player): no setpoint is lost for want of
     # a copy to resend
     player = Player(joints, args.topic, depth=len(times))
-    recorder = None
+    recorder: recording.Recorder | None = None
     try:
         if stop.hand_over(restore_python_handlers=True) is not None:
             return 130
-        if not player.wait_for_node(args.wait):
+        if not player.wait_for_subscriber(args.wait):
             print(f'cog_id_player: nothing subscribes to {player.publisher.topic_name} '
                   f'after {args.wait:g} s (is cog_id_node running, in this namespace and '
                   'ROS_DOMAIN_ID?)', file=sys.stderr)
@@ -264,6 +270,7 @@ def main(argv: list[str] | None = None) -> int:
                 return LOST
             return 0
         status = recording.diagnostics_name(player.get_namespace(), args.node)
+        assert recorder is not None       # made above: args.output
         stamps, account, received = play_recorded(player, recorder, effort_topic, status,
                                                   times, q, qd, where=args.node)
         found = np.array([s in received for s in stamps])

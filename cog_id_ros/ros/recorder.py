@@ -24,20 +24,23 @@ import os
 import signal
 import threading
 import time
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 #: the node's counters of what happened to the setpoints it was sent (its /diagnostics keys)
 COUNTERS = ('setpoints_accepted', 'setpoints_rejected', 'setpoints_lost')
+#: the efforts recorded on a topic: stamp (ns) -> (names, efforts)
+Received = dict[int, tuple[list[str], list[float]]]
 #: s after which the first setpoint is sent again when the node's counters are unknown
 BLIND_RESEND = 1.0
 
 
-def diagnostics_name(namespace, node='cog_id_node'):
+def diagnostics_name(namespace: str, node: str = 'cog_id_node') -> str:
     """The name of the node's DiagnosticStatus (see docs/node.md, "Diagnostics")."""
     namespace = '/' + namespace.strip('/') if namespace.strip('/') else ''
     return f'{namespace}/{node}: inverse dynamics'
 
 
-def counters(values):
+def counters(values: Mapping[str, str] | None) -> dict[str, int] | None:
     """The three counters of a diagnostics report ``values`` (key -> str), or None."""
     if values is None:
         return None
@@ -53,7 +56,9 @@ class Account:
 
     ``sent``: setpoints published; ``recorded``: how many of them have a recorded effort
     (matched by stamp); ``accepted``, ``rejected``, ``lost``: the node's counters over the
-    run (None when no report of the node came, before or after).
+    run (None when no report of the node came, before or after). The properties below
+    count with them only for a ``reported`` account (which mypy cannot tell: the
+    ``type: ignore[operator]`` comments).
     """
 
     where: str
@@ -64,31 +69,32 @@ class Account:
     lost: int | None = None
 
     @property
-    def reported(self):
+    def reported(self) -> bool:
         return self.accepted is not None
 
     @property
-    def uncounted(self):
+    def uncounted(self) -> int:
         """Setpoints the node neither answered, rejected nor counted as lost: it never saw
         them and could not tell (published before its subscription matched, or the last of
         the stream lost with nothing after them to show the gap)."""
-        return self.sent - self.accepted - self.rejected - self.lost
+        return self.sent - self.accepted - self.rejected - self.lost  # type: ignore[operator]
 
     @property
-    def unrecorded(self):
+    def unrecorded(self) -> int:
         """Efforts the node says it sent (one per accepted setpoint) that were not recorded."""
-        return self.accepted - self.recorded
+        return self.accepted - self.recorded  # type: ignore[operator]
 
     @property
-    def complete(self):
+    def complete(self) -> bool:
         """Every setpoint answered and recorded, and the node's report says the same (or
         there is no report, which cannot contradict a full recording)."""
         if self.recorded < self.sent:
             return False
-        return not self.reported or (self.accepted >= self.sent and self.rejected == 0
+        return not self.reported or (self.accepted >= self.sent  # type: ignore[operator]
+                                     and self.rejected == 0
                                      and self.lost == 0)
 
-    def losses(self):
+    def losses(self) -> str:
         """Where setpoints went unanswered or unrecorded: one clause each, '' when none."""
         if self.complete:
             return ''
@@ -97,10 +103,10 @@ class Account:
             return (f'{missing} of {self.sent} setpoints have no recorded effort, and no '
                     '/diagnostics report of the node came to say whether the node or the '
                     'recorder lost them')
-        parts = []
-        if self.lost > 0:
+        parts: list[str] = []
+        if self.lost > 0:  # type: ignore[operator]
             parts.append(f'node: {self.lost} setpoints lost before the node took them')
-        if self.rejected > 0:
+        if self.rejected > 0:  # type: ignore[operator]
             parts.append(f'node: {self.rejected} setpoints rejected (its log says why)')
         if self.uncounted > 0:
             parts.append(f'node: {self.uncounted} setpoints never reached the node (not in its '
@@ -117,7 +123,8 @@ class Account:
         return '; '.join(parts)
 
 
-def account(where, sent, recorded, before, after):
+def account(where: str, sent: int, recorded: int, before: Mapping[str, int] | None,
+            after: Mapping[str, int] | None) -> Account:
     """The :class:`Account` of one node; ``before``/``after``: its counters (see
     :func:`counters`) from a report before the run and the last one after it. ``before``
     None: the node reported nothing before the run, which for a node started for the run
@@ -139,7 +146,7 @@ class Recorder:
     call :meth:`close`.
     """
 
-    def __init__(self, topics, depth, start_timeout=60.0):
+    def __init__(self, topics: Iterable[str], depth: int, start_timeout: float = 60.0) -> None:
         self.topics = list(topics)
         self.depth = int(depth)
         ctx = multiprocessing.get_context('spawn')
@@ -153,10 +160,10 @@ class Recorder:
         self._ask_timeout = 10.0
 
     @property
-    def pid(self):
+    def pid(self) -> int | None:
         return self._process.pid
 
-    def _reply(self):
+    def _reply(self) -> Any:
         if not self._conn.poll(self._ask_timeout):
             raise RuntimeError(f'the recorder process did not answer in {self._ask_timeout:g} s')
         try:
@@ -168,15 +175,15 @@ class Recorder:
             raise RuntimeError(f'the recorder process failed: {reply}')
         return reply
 
-    def _ask(self, *request):
+    def _ask(self, *request: object) -> Any:
         self._conn.send(request)
         return self._reply()
 
-    def matched(self):
+    def matched(self) -> dict[str, int]:
         """Per topic: the number of publishers its subscription is matched with."""
         return self._ask('matched')
 
-    def wait_matched(self, topics=None, timeout=30.0):
+    def wait_matched(self, topics: Iterable[str] | None = None, timeout: float = 30.0) -> bool:
         """True once every one of ``topics`` (default: all) has a matched publisher."""
         topics = self.topics if topics is None else list(topics)
         end = time.monotonic() + timeout
@@ -188,18 +195,18 @@ class Recorder:
                 return False
             time.sleep(0.02)
 
-    def efforts(self, topic):
+    def efforts(self, topic: str) -> tuple[Received, int]:
         """``(received, messages)``: stamp (ns) -> (names, efforts) of the messages recorded
         on ``topic``, and how many messages came (a repeated stamp counts twice)."""
         return self._ask('efforts', topic)
 
-    def report(self, name):
+    def report(self, name: str) -> tuple[int, dict[str, str] | None, int | None]:
         """``(count, values, stamp)`` of the diagnostics status ``name``: how many reports
         came, the last one's key -> value and its header stamp (ns, the node's clock);
         ``(0, None, None)`` before the first."""
         return self._ask('report', name)
 
-    def close(self):
+    def close(self) -> None:
         if self._process.is_alive():
             try:
                 self._conn.send(('stop',))
@@ -211,13 +218,13 @@ class Recorder:
             self._process.join()
         self._conn.close()
 
-    def __enter__(self):
+    def __enter__(self) -> 'Recorder':
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def first_report(self, name, timeout=30.0):
+    def first_report(self, name: str, timeout: float = 30.0) -> dict[str, int] | None:
         """The node's counters (:func:`counters`) from its next report (None after
         ``timeout``): a report from before a run is where the run's counts start."""
         end = time.monotonic() + timeout
@@ -229,7 +236,9 @@ class Recorder:
             time.sleep(0.02)
         return None
 
-    def answer_first(self, topic, name, stamp, send, before, delivered, timeout=30.0):
+    def answer_first(self, topic: str, name: str, stamp: int, send: Callable[[], object],
+                     before: Mapping[str, int] | None, delivered: Callable[[], bool],
+                     timeout: float = 30.0) -> bool:
         """Send the first setpoint (``send()``, stamped ``stamp``) until the node answers it;
         True once its effort is recorded, False when the node refused it or ``timeout``
         passed.
@@ -277,7 +286,9 @@ class Recorder:
                 time.sleep(0.01)
         return False
 
-    def settle(self, where, topic, diagnostics, stamps, before, quiet=3.0, timeout=30.0):
+    def settle(self, where: str, topic: str, diagnostics: str, stamps: Sequence[int],
+               before: Mapping[str, int] | None, quiet: float = 3.0,
+               timeout: float = 30.0) -> tuple[Account, Received]:
         """Wait until the run is accounted for, then return ``(Account, received)``.
 
         Done when the node's counters cover every setpoint sent and every effort it says
@@ -307,7 +318,7 @@ class Recorder:
             time.sleep(0.05)
 
 
-def _serve(conn, topics, depth):
+def _serve(conn: Any, topics: list[str], depth: int) -> None:
     """The recorder process: subscriptions spun by an executor thread, requests on ``conn``."""
     # the parent decides when the recorder stops: a Ctrl-C in the terminal reaches the whole
     # process group, and the parent still wants the recording to account for the run
@@ -329,16 +340,16 @@ def _serve(conn, topics, depth):
         conn.send(RuntimeError(f'{type(exc).__name__}: {exc}'))
         return
     lock = threading.Lock()
-    efforts = {topic: {} for topic in topics}
+    efforts: dict[str, Received] = {topic: {} for topic in topics}
     messages = dict.fromkeys(topics, 0)
-    reports = {}
+    reports: dict[str, tuple[int, dict[str, str], int]] = {}
 
-    def on_effort(topic, msg):
+    def on_effort(topic: str, msg: Any) -> None:
         with lock:
             messages[topic] += 1
             efforts[topic][stamp_to_ns(msg.header.stamp)] = (list(msg.name), list(msg.effort))
 
-    def on_diagnostics(msg):
+    def on_diagnostics(msg: Any) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
         with lock:
             for status in msg.status:
@@ -349,7 +360,8 @@ def _serve(conn, topics, depth):
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(1, depth),
                      reliability=ReliabilityPolicy.RELIABLE)
     subscriptions = {topic: node.create_subscription(
-        JointState, topic, lambda msg, topic=topic: on_effort(topic, msg), qos)
+        JointState, topic, lambda msg, topic=topic: on_effort(topic, msg),  # type: ignore[misc]
+        qos)
         for topic in topics}
     # reliable like the node's publisher of /diagnostics (keep-last 10 there)
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics,
@@ -367,7 +379,7 @@ def _serve(conn, topics, depth):
                 break
             with lock:
                 if request[0] == 'matched':
-                    reply = {t: s.get_publisher_count() for t, s in subscriptions.items()}
+                    reply: Any = {t: s.get_publisher_count() for t, s in subscriptions.items()}
                 elif request[0] == 'efforts':
                     reply = (dict(efforts[request[1]]), messages[request[1]])
                 elif request[0] == 'report':

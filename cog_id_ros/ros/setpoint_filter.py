@@ -35,6 +35,10 @@ Estimating does not change the filter: the caller calls :meth:`SetpointFilter.ac
 the setpoint has been served, so a setpoint the solver rejected never enters the history.
 """
 import functools
+from typing import Any, Sequence
+
+#: a history entry: (stamp in ns, positions, velocities as given or None)
+Row = tuple[int, list[float], list[float] | None]
 
 NANOSECONDS = 1_000_000_000
 
@@ -51,7 +55,7 @@ class SetpointFilter:
     between two setpoints restarts the estimator (``None``: never).
     """
 
-    def __init__(self, n_joints, window=4, max_interval=0.1):
+    def __init__(self, n_joints: int, window: int = 4, max_interval: float | None = 0.1) -> None:
         window = int(window)
         if not 3 <= window <= 8:
             raise ValueError(f'window must be between 3 and 8, got {window}')
@@ -63,30 +67,30 @@ class SetpointFilter:
             int(round(max_interval * NANOSECONDS))
         self.reset()
 
-    def reset(self):
+    def reset(self) -> None:
         """Forget every setpoint: the next one starts a new stream (any stamp is accepted)."""
         # newest first: (stamp in ns, positions, velocities as given or None), at most window-1
-        self._history = []
-        self.last_stamp_ns = None
+        self._history: list[Row] = []
+        self.last_stamp_ns: int | None = None
 
     @property
-    def history(self):
+    def history(self) -> int:
         """Number of setpoints the next estimate can use besides its own."""
         return len(self._history)
 
     @property
-    def last_positions(self):
+    def last_positions(self) -> list[float] | None:
         """Positions of the newest accepted setpoint (a list), or None after a restart."""
         return self._history[0][1] if self._history else None
 
-    def restarts_at(self, stamp_ns):
+    def restarts_at(self, stamp_ns: int) -> bool:
         """True when a setpoint at ``stamp_ns`` starts a new stream (no usable history)."""
         if not self._history:
             return True
         return self.max_interval_ns is not None and \
             stamp_ns - self._history[0][0] > self.max_interval_ns
 
-    def check_stamp(self, stamp_ns):
+    def check_stamp(self, stamp_ns: int) -> None:
         """Raise StampError unless ``stamp_ns`` comes after the last accepted stamp."""
         last = self.last_stamp_ns
         if last is not None and stamp_ns <= last:
@@ -96,7 +100,8 @@ class SetpointFilter:
                 f'stamp {_format_stamp(stamp_ns)} {how} (previous accepted setpoint: '
                 f'{_format_stamp(last)})')
 
-    def estimate(self, stamp_ns, positions, velocities=None):
+    def estimate(self, stamp_ns: int, positions: Sequence[float],
+                 velocities: Sequence[float] | None = None) -> tuple[list[float], list[float]]:
         """(velocities, accelerations) at ``stamp_ns`` as lists of floats; the filter is unchanged.
 
         ``velocities`` given are returned as they are; missing ones are estimated.
@@ -125,7 +130,8 @@ class SetpointFilter:
             return _two_weighted_differences(w1, w2, past, q)
         return v, _weighted_differences(w2, past, q)
 
-    def accept(self, stamp_ns, positions, velocities=None):
+    def accept(self, stamp_ns: int, positions: Sequence[float],
+               velocities: Sequence[float] | None = None) -> None:
         """Add a served setpoint to the history (``velocities``: as given, or None)."""
         if self.restarts_at(stamp_ns):
             self.reset()
@@ -134,9 +140,9 @@ class SetpointFilter:
         del self._history[self.window - 1:]
         self.last_stamp_ns = int(stamp_ns)
 
-    def _given_velocity_rows(self, limit):
+    def _given_velocity_rows(self, limit: int) -> list[Row]:
         """The newest history entries (at most ``limit``) that all carry given velocities."""
-        rows = []
+        rows: list[Row] = []
         for row in self._history[:limit]:
             if row[2] is None:
                 break
@@ -144,12 +150,13 @@ class SetpointFilter:
         return rows
 
     @staticmethod
-    def _offsets(stamp_ns, rows):
+    def _offsets(stamp_ns: int, rows: Sequence[Row]) -> tuple[int, ...]:
         """Integer nanoseconds from the newest sample back to each history row."""
         return tuple([r[0] - stamp_ns for r in rows])   # a list first: faster than a generator
 
 
-def _weighted_differences(weights, past, now):
+def _weighted_differences(weights: Sequence[float], past: Sequence[Any],
+                          now: Sequence[float]) -> list[float]:
     """sum_k weights[k] * (past[k] - now), per joint."""
     out = [0.0] * len(now)
     for w, row in zip(weights, past):
@@ -158,7 +165,9 @@ def _weighted_differences(weights, past, now):
     return out
 
 
-def _two_weighted_differences(w1, w2, past, now):
+def _two_weighted_differences(w1: Sequence[float], w2: Sequence[float],
+                              past: Sequence[Sequence[float]],
+                              now: Sequence[float]) -> tuple[list[float], list[float]]:
     """_weighted_differences for w1 and for w2 in one pass (the same sums, in the same order)."""
     out1, out2 = [0.0] * len(now), [0.0] * len(now)
     for a, b, row in zip(w1, w2, past):
@@ -170,7 +179,7 @@ def _two_weighted_differences(w1, w2, past, now):
 
 
 @functools.lru_cache(maxsize=512)
-def _weights(offsets_ns):
+def _weights(offsets_ns: tuple[int, ...]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Weights of the 1st and 2nd derivative at 0 of the interpolating polynomial.
 
     The nodes are 0 and ``offsets_ns`` (nanoseconds, negative). Returns two arrays of
@@ -180,7 +189,8 @@ def _weights(offsets_ns):
     Lagrange basis L_j(s) = prod_{k != j} (s - x_k) / (x_j - x_k), expanded to s^2.
     """
     nodes = [0.0] + [o / NANOSECONDS for o in offsets_ns]
-    w1, w2 = [], []
+    w1: list[float] = []
+    w2: list[float] = []
     for j in range(1, len(nodes)):
         c0, c1, c2, denom = 1.0, 0.0, 0.0, 1.0
         for k, x in enumerate(nodes):
@@ -193,6 +203,6 @@ def _weights(offsets_ns):
     return tuple(w1), tuple(w2)
 
 
-def _format_stamp(stamp_ns):
+def _format_stamp(stamp_ns: int) -> str:
     sec, nsec = divmod(int(stamp_ns), NANOSECONDS)
     return f'{sec}.{nsec:09d}'

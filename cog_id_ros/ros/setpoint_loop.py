@@ -38,22 +38,25 @@ at 2 kHz it lost 36 and 472 of 20,000 setpoints, this loop none.
 """
 import contextlib
 import threading
+from typing import Any, Callable, ContextManager
 
 from rclpy.callback_groups import CallbackGroup
 from rclpy.guard_condition import GuardCondition
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
 
 
 class OwnThreadCallbackGroup(CallbackGroup):
     """A callback group no executor ever runs: its entities are served elsewhere."""
 
-    def can_execute(self, entity):
+    def can_execute(self, entity: Any) -> bool:
         return False
 
-    def beginning_execution(self, entity):
+    def beginning_execution(self, entity: Any) -> bool:
         return False
 
-    def ending_execution(self, entity):
+    def ending_execution(self, entity: Any) -> None:
         pass
 
 
@@ -71,12 +74,14 @@ class SetpointLoop:
     timestamps, the publisher's ``publication_sequence_number``).
     """
 
-    def __init__(self, node, msg_type, topic, callback, qos_profile, *, lock=None,
-                 on_error=None, with_info=False, **subscription_kwargs):
+    def __init__(self, node: Node, msg_type: type, topic: str, callback: Callable[..., None],
+                 qos_profile: QoSProfile | int, *, lock: ContextManager[Any] | None = None,
+                 on_error: Callable[[Exception], None] | None = None, with_info: bool = False,
+                 **subscription_kwargs: Any) -> None:
         self.node = node
         self.callback = callback
         self.with_info = with_info
-        self._held = contextlib.nullcontext() if lock is None else lock
+        self._held: ContextManager[Any] = contextlib.nullcontext() if lock is None else lock
         self.on_error = on_error or self._log_error
         self.subscription = node.create_subscription(
             msg_type, topic, _never_called, qos_profile, callback_group=OwnThreadCallbackGroup(),
@@ -86,17 +91,18 @@ class SetpointLoop:
         # and its events share one listener, and a second wait set waiting on the events
         # (the executor's) takes the data wake-ups away from this one (measured: p99 latency
         # from 0.3 ms to 15-150 ms).
-        self.event_handlers = list(self.subscription.event_handlers)
+        # (a list: rclpy annotates Subscription.event_handlers as one EventHandler)
+        self.event_handlers = list(self.subscription.event_handlers)  # type: ignore[call-overload]
         self._wake = GuardCondition(None, None, context=node.context)
         self._stopping = False
-        self._thread = None
+        self._thread: threading.Thread | None = None
         #: the exception that ended the thread, if one did (the node reports it: a loop that
         #: dies must never do so silently)
-        self.failure = None
+        self.failure: BaseException | None = None
         #: whether the thread ended because the context was shut down (Ctrl-C, SIGTERM)
         self._ended_at_shutdown = False
 
-    def start(self):
+    def start(self) -> None:
         """Start serving. The wait set is built here, in the caller's thread (an error
         shows there); the thread inherits the caller's signal mask."""
         sub = self.subscription
@@ -113,7 +119,7 @@ class SetpointLoop:
                                         name=f'{sub.topic} loop', daemon=True)
         self._thread.start()
 
-    def stop(self, timeout=5.0):
+    def stop(self, timeout: float = 5.0) -> None:
         """Stop the thread and wait for it (the callback in progress, if any, finishes)."""
         if self._stopping:
             return
@@ -127,11 +133,11 @@ class SetpointLoop:
         self._wake.destroy()
 
     @property
-    def running(self):
+    def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
 
     @property
-    def ended_by_itself(self):
+    def ended_by_itself(self) -> bool:
         """Whether the thread ended with an exception, or while nobody stopped it and the
         context was still ok (a bug); not when it ended because the context was shut down
         (rclpy's signal handler does that on Ctrl-C, before the node stops its threads)."""
@@ -139,7 +145,7 @@ class SetpointLoop:
             return False
         return self.failure is not None or not (self._stopping or self._ended_at_shutdown)
 
-    def _run(self, wait_set, in_use):
+    def _run(self, wait_set: Any, in_use: contextlib.ExitStack) -> None:
         sub = self.subscription
         try:
             self._loop(wait_set, sub.handle, sub.msg_type, sub.raw, self.node.context)
@@ -156,7 +162,7 @@ class SetpointLoop:
             wait_set.destroy_when_not_in_use()
             in_use.close()
 
-    def _loop(self, wait_set, handle, msg_type, raw, context):
+    def _loop(self, wait_set: Any, handle: Any, msg_type: Any, raw: bool, context: Any) -> None:
         wake = self._wake.handle
         events = self.event_handlers
         while not self._stopping:
@@ -183,7 +189,7 @@ class SetpointLoop:
             if not context.ok():
                 return
 
-    def _serve(self, taken):
+    def _serve(self, taken: tuple[Any, Any]) -> None:
         with self._held:
             try:
                 if self.with_info:
@@ -194,12 +200,12 @@ class SetpointLoop:
                 if self.node.context.ok():
                     self._report(exc)
 
-    def _take_failed(self, exc):
+    def _take_failed(self, exc: Exception) -> None:
         """Taking a message failed: reported like a callback error; the loop waits again."""
         with self._held:
             self._report(exc)
 
-    def _report(self, exc):
+    def _report(self, exc: Exception) -> None:
         """``on_error(exc)``; if that fails too, the node's log (the loop goes on)."""
         try:
             self.on_error(exc)
@@ -209,7 +215,7 @@ class SetpointLoop:
             except Exception:   # noqa: BLE001
                 pass
 
-    def _handle_event(self, event):
+    def _handle_event(self, event: Any) -> None:
         data = event.take_data()
         if data:
             try:
@@ -217,10 +223,10 @@ class SetpointLoop:
             except Exception as exc:   # noqa: BLE001
                 self._log_error(exc)
 
-    def _log_error(self, exc):
+    def _log_error(self, exc: Exception) -> None:
         self.node.get_logger().error(
             f'{self.subscription.topic_name}: callback failed: {type(exc).__name__}: {exc}')
 
 
-def _never_called(msg):
+def _never_called(msg: object) -> None:
     raise AssertionError('SetpointLoop subscriptions are served by their own thread')

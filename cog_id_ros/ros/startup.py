@@ -13,7 +13,7 @@ and ``internal_error(where, exc)`` (counts and logs an exception out of a callba
 import gc
 import sys
 import time
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import rclpy
 import rclpy.exceptions
@@ -32,7 +32,7 @@ PARAMETER_ERRORS = (MechanismConfigError, rclpy.exceptions.InvalidParameterTypeE
                     rclpy.exceptions.InvalidParameterValueException)
 
 
-def run(name: str, build: Callable[..., Any], args: Sequence[str] | None = None) -> int:
+def run(name: str, build: Callable[..., Any], args: list[str] | None = None) -> int:
     """Build the node ``name`` with ``build(interruptible=...)`` and spin it; the exit status.
 
     ``args``: the process's arguments (None: sys.argv). ``interruptible`` is the context

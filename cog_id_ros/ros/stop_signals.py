@@ -39,6 +39,8 @@ the way, core/native_build.py)::
 """
 import contextlib
 import signal
+from types import FrameType
+from typing import Iterator
 
 from rclpy.signals import SignalHandlerOptions, install_signal_handlers
 
@@ -49,7 +51,7 @@ class StopRequested(BaseException):
     """A stop signal during an interruptible part of start-up (a BaseException, like
     KeyboardInterrupt, so that no ``except Exception`` on the way swallows it)."""
 
-    def __init__(self, signum):
+    def __init__(self, signum: int) -> None:
         self.signum = signum
         super().__init__(f'stopped by {signal.Signals(signum).name} during start-up')
 
@@ -60,12 +62,12 @@ class DeferredStop:
     #: the ``signal_handler_options`` for ``rclpy.init``: none until the hand-over
     RCLPY_OPTIONS = SignalHandlerOptions.NO
 
-    def __init__(self):
-        self.received = None        # the first stop signal noted, or None
+    def __init__(self) -> None:
+        self.received: int | None = None        # the first stop signal noted, or None
         self._interruptible = False
         self._previous = {signum: signal.signal(signum, self._note) for signum in STOP_SIGNALS}
 
-    def _note(self, signum, frame):
+    def _note(self, signum: int, frame: FrameType | None) -> None:
         if self.received is None:
             self.received = signum
         if self._interruptible:
@@ -73,7 +75,7 @@ class DeferredStop:
             raise StopRequested(signum)
 
     @contextlib.contextmanager
-    def interruptible(self):
+    def interruptible(self) -> Iterator[None]:
         """Within the block a stop signal raises StopRequested (in the main thread, where
         Python runs signal handlers); one noted before it raises on entry."""
         if self.received is not None:
@@ -84,7 +86,7 @@ class DeferredStop:
         finally:
             self._interruptible = False
 
-    def hand_over(self, restore_python_handlers=False):
+    def hand_over(self, restore_python_handlers: bool = False) -> int | None:
         """Install rclpy's signal handlers; return the signal noted before, or None.
 
         ``restore_python_handlers``: put back the Python handlers that were there before
@@ -103,5 +105,5 @@ class DeferredStop:
         return self.received
 
 
-def _run_pending_handlers():
+def _run_pending_handlers() -> None:
     """Nothing: entering a Python function makes the interpreter run pending signal handlers."""

@@ -10,8 +10,12 @@ Importing this needs no ROS; :func:`control_qos` imports rclpy when it is called
 """
 import dataclasses
 import sys
+from typing import TYPE_CHECKING
 
 from .parameters import docs_main
+
+if TYPE_CHECKING:
+    from rclpy.qos import QoSProfile
 
 #: keep-last depth of the control topics: 100 setpoints are 50-100 ms of a 2-1 kHz stream.
 #: Deep enough that a Python pause (garbage collection, a busy core) or a burst from the
@@ -24,7 +28,7 @@ CONTROL_QOS_DEPTH = 100
 DIAGNOSTICS_QOS_DEPTH = 10
 
 
-def control_qos():
+def control_qos() -> 'QoSProfile':
     """The QoS of the control topics (a new profile each call: QoS overrides modify it)."""
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=CONTROL_QOS_DEPTH,

@@ -200,7 +200,8 @@ class TrajectoryWorker:
                 if self._next is not None:
                     raw, self._next = self._next, None
                 else:
-                    raw, self._pending = self._pending, None
+                    # (not None: the wait above ended on it)
+                    raw, self._pending = self._pending, None  # type: ignore[assignment]
                 self.busy = True
             try:
                 result = self._solve(raw)
@@ -263,7 +264,8 @@ class _Sender(threading.Thread):
 
     def __init__(self, conn: Any, raw: bytes) -> None:
         super().__init__(name='trajectory sender', daemon=True)
-        self._conn, self._raw = conn, raw
+        self._conn = conn
+        self._raw: bytes | None = raw
         self.error: BaseException | None = None
         self.start()
 
@@ -312,7 +314,7 @@ def trajectory_process(conn: Any, config: NodeConfig, parent: int | None = None,
             return
         try:
             out, clipped, points = solve_trajectory_message(raw, solver, selector, **options)
-            answer = ('ok', out, clipped, points)
+            answer: tuple = ('ok', out, clipped, points)
         except Rejected as exc:
             answer = ('rejected', exc.reason, str(exc), getattr(exc, 'points', None))
         except Exception as exc:   # noqa: BLE001 (answer every trajectory)

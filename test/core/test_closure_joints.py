@@ -396,19 +396,22 @@ def test_a_platform_described_turned_round_is_assembled_on_the_same_branch():
         assert np.abs(got - expected).max() < 1e-10 * np.abs(expected).max(), backend
 
 
-def test_a_link_between_two_ball_joints_is_refused_naming_what_can_still_move():
+@pytest.mark.parametrize('idle_spins', ['refuse', 'lock'])
+def test_a_link_between_two_ball_joints_is_refused_naming_the_fix(idle_spins):
     """The R-S-U-R coupler with a ball joint at each end spins idly about the line through
-    their centres: refused at load, naming the joints that move with the crank held and the
-    fix (one of them universal), not only 'add active joints' (spherical joints cannot be)."""
+    their centres (core/idle_spins.py): refused at load, naming the link, its two spherical
+    joints and the fix (one of them universal), not 'add active joints' (spherical joints
+    cannot be); with idle_spins: lock too, as nothing there can be locked."""
     p = rsur_both()
     p['joints.uni.type'] = 'spherical'
+    p['mechanism.idle_spins'] = idle_spins
     del p['joints.uni.axis'], p['joints.uni.axis2']
     with pytest.raises(cog_id_ros.MechanismConfigError) as info:
         cog_id_ros.Mechanism.from_parameters(p)
     text = str(info.value)
-    assert info.value.parameter == 'mechanism.active_joints', text
-    assert 'with every actuator held, sph can still move' in text, text
-    assert 'hidden' in text and '`type: universal`' in text, text
+    assert info.value.parameter == 'joints.sph.type', text
+    assert "link 'coupler' spins between the spherical joints 'sph' and 'uni'" in text, text
+    assert 'no coordinate to lock' in text and '`type: universal`' in text, text
 
 
 def stacked_platforms(native):

@@ -128,14 +128,14 @@ def test_assembly_holds_the_actuators_at_their_initial_positions():
 LOAD_CHILD = r"""
 import json, sys, time
 import cog_id_ros
-start = time.perf_counter()
+start = time.process_time()     # CPU seconds: the load of a shared machine does not count
 try:
     cog_id_ros.Mechanism.from_params_file(sys.argv[1])
     out = {'type': None}
 except BaseException as exc:  # noqa: BLE001 -- report whatever came out
     out = {'type': type(exc).__name__, 'parameter': getattr(exc, 'parameter', None),
            'message': str(exc)[:500]}
-out['seconds'] = time.perf_counter() - start
+out['seconds'] = time.process_time() - start
 print(json.dumps(out))
 """
 
@@ -200,7 +200,8 @@ def _run_load(path):
 def test_bad_file_values_are_config_errors_within_two_seconds(case, tmp_path):
     """Reliability item 4: nulls, a 400-digit integer, recursive and exponential ("billion
     laughs") YAML aliases, absurd nesting: MechanismConfigError naming the parameter (or
-    params_file) within 2 s, never TypeError, OverflowError, RecursionError or a hang."""
+    params_file) within 2 s of CPU time (wall time on a loaded machine is not the loader's),
+    never TypeError, OverflowError, RecursionError or a hang (30 s of wall time)."""
     edit, parameter = BAD_FILES[case]
     text = edit(_paper_a_text())
     assert text != _paper_a_text()
@@ -340,7 +341,7 @@ def test_the_largest_values_within_the_bounds_give_finite_torques():
         cog_id_ros.Mechanism.from_parameters(params)
 
 
-# --- Reliability item 21: names of links and joints are ROS 2 parameter name parts ---------
+# --- Issue 23 (was reliability item 21): any name of a link or joint ------------------------
 
 def _renamed(params, old, new):
     def fix(v):
@@ -352,30 +353,42 @@ def _renamed(params, old, new):
     return {k.replace(f'.{old}.', f'.{new}.'): fix(v) for k, v in params.items()}
 
 
-BAD_NAMES = [
-    ('mechanism.links', 'link1', 'link.one', "contains '.'", 'link_one'),
-    ('mechanism.joints', 'joint2', 'joint.2', "contains '.'", 'joint_2'),
-    ('mechanism.links', 'link2', 'link-2', "'-'", 'link_2'),
-    ('mechanism.joints', 'joint3', 'joint 3', "' '", 'joint_3'),
-    ('mechanism.links', 'link3', '3rd', 'starts with a digit', 'link_3rd'),
-    ('mechanism.joints', 'joint4', 'gelenk\u00e4', "'\u00e4'", 'gelenk_'),
+ANY_NAMES = [
+    ('link1', 'link.one'), ('joint2', 'joint.2'), ('link2', 'link-2'), ('joint3', 'joint 3'),
+    ('link3', '3rd/left'), ('joint4', 'gelenk\u00e4'),
 ]
 
 
-@pytest.mark.parametrize('parameter,old,new,why,suggestion', BAD_NAMES,
-                         ids=[b[2] for b in BAD_NAMES])
-def test_names_that_cannot_be_ros_parameter_components_are_refused(parameter, old, new, why,
-                                                                   suggestion):
-    """Reliability item 21: a link named 'link.one' loaded in the API while the node refused
-    the same file; names must hold only letters, digits and '_' (no leading digit), and the
-    message says to use '_' instead."""
+@pytest.mark.parametrize('old,new', ANY_NAMES, ids=[b[1] for b in ANY_NAMES])
+def test_any_name_loads_and_outputs_carry_it(old, new):
+    """Issue 23: names as CAD exporters write them ('.', '/', a leading digit, spaces,
+    non-ASCII) load; ``links`` and ``joints`` carry them unchanged, and the torques are those
+    of the same mechanism with its names as before."""
     params = _renamed(from_yaml(PAPER_A), old, new)
+    mech = cog_id_ros.Mechanism.from_parameters(params)
+    assert new in mech.links + mech.joints + mech.active_joints
+    before = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_parameters(from_yaml(PAPER_A)))
+    after = cog_id_ros.InverseDynamics(mech)
+    q = before.mechanism.assembled_positions
+    active = [q[j] for j in before.mechanism.active_index]
+    assert after.sample_torques(active, [0.5] * len(active), [0.2] * len(active)) == \
+        before.sample_torques(active, [0.5] * len(active), [0.2] * len(active))
+
+
+def test_a_dotted_name_is_told_apart_in_unknown_parameters():
+    params = _renamed(from_yaml(PAPER_A), 'link1', 'link.one')
+    params['links.link.one.mas'] = 1.0
     with pytest.raises(cog_id_ros.MechanismConfigError) as info:
         cog_id_ros.Mechanism.from_parameters(params)
-    assert info.value.parameter == parameter
-    message = str(info.value)
-    assert repr(new) in message and why in message
-    assert "use '_' instead" in message and suggestion in message
+    assert 'links.link.one.* takes' in str(info.value)
+
+
+def test_a_name_with_a_control_character_is_refused():
+    params = _renamed(from_yaml(PAPER_A), 'joint2', 'joint\n2')
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        cog_id_ros.Mechanism.from_parameters(params)
+    assert info.value.parameter == 'mechanism.joints'
+    assert "'joint\\n2'" in str(info.value) and 'U+000A' in str(info.value)
 
 
 # --- Reliability item 24: what assembly had to change is said at load -------------------------
@@ -523,3 +536,27 @@ def test_a_closure_tolerance_no_double_can_meet_is_refused():
     params = with_changes(from_yaml(PAPER_A), mechanism__closure_tolerance=5e-324)
     with pytest.raises(cog_id_ros.MechanismConfigError, match='at least 1e-14'):
         cog_id_ros.Mechanism.from_parameters(params)
+
+
+def test_a_dotted_name_keying_a_mapping_is_written_flat(tmp_path):
+    """Issue 23: rcl files the keys after a mapping whose key holds '.' under a wrong name
+    (links: {"link.one": {...}, link2: ...} gives links.link.link2.*; checked with rcl,
+    Jazzy), so a parameter file with one is refused naming the key and the escape, flat
+    quoted keys, which load; a dotted name as the last part of a key is fine."""
+    from cog_id_ros.description.params_file import load_params_file
+    base = ('/**:\n  ros__parameters:\n    mechanism:\n      initial_positions: {"a.b": 1.0, c: 2.0}\n'
+            '    links:\n')
+    nested = tmp_path / 'nested.yaml'
+    nested.write_text(base + '      "link.one": {mass: 1.0}\n      link2: {mass: 2.0}\n')
+    with pytest.raises(cog_id_ros.MechanismConfigError) as info:
+        load_params_file(str(nested))
+    assert info.value.parameter == 'links.link.one'
+    assert "'links.link.link2'" in str(info.value) and '"link.one.mass"' in str(info.value)
+    flat = tmp_path / 'flat.yaml'
+    flat.write_text(base + '      "link.one.mass": 1.0\n      link2: {mass: 2.0}\n')
+    params = load_params_file(str(flat))
+    assert params['links.link.one.mass'] == 1.0 and params['links.link2.mass'] == 2.0
+    assert params['mechanism.initial_positions.a.b'] == 1.0
+    last = tmp_path / 'last.yaml'       # nothing follows it: rcl reads it right
+    last.write_text(base + '      link2: {mass: 2.0}\n      "link.one": {mass: 1.0}\n')
+    assert load_params_file(str(last))['links.link.one.mass'] == 1.0

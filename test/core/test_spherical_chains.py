@@ -87,6 +87,7 @@ def test_a_chain_that_is_not_a_spherical_joint_is_solved_as_written(change):
         p['links.sph_a.mass'] = 0.01
     elif change == 'active':                     # a chain joint driven (then two actuators)
         p['mechanism.active_joints'] = p['mechanism.active_joints'] + ['sph_y']
+        p['mechanism.torque_weights'] = [1.0, 1.0]     # the redundancy is meant: no warning
     elif change == 'offset':                     # the middle axis (y) 1 mm off the centre
         xyz = p.get('joints.sph_y.parent_xyz', [0.0, 0.0, 0.0])
         p['joints.sph_y.parent_xyz'] = [xyz[0] + 1e-3, xyz[1], xyz[2]]
@@ -118,6 +119,22 @@ def test_found_in_any_frames_and_either_direction(monkeypatch):
     p = reversed_joint(p, 'sph_y')
     mech = cog_id_ros.Mechanism.from_parameters(p)
     assert len(mech.spherical_chains) == 1
+    check_as_written(mech, as_written(p, monkeypatch), 'spatial_rsur.yaml')
+
+
+def test_a_chain_that_ends_on_the_base_link_reads_back_its_angles(monkeypatch):
+    """The R-S-U-R re-rooted at its crank (the crank the base link, the ground a moving
+    link) with its chain written from the coupler towards the crank: the chain's far end C
+    is the base link, whose rotation is the identity (its angles were not read back: a
+    TypeError in last_pose and every position). The same numbers as written."""
+    p = rsur()
+    p['mechanism.base_link'] = 'crank'
+    p['mechanism.links'] = ['ground'] + [n for n in p['mechanism.links'] if n != 'crank']
+    for key in ('mass', 'com', 'inertia'):
+        p[f'links.ground.{key}'] = p.pop(f'links.crank.{key}')
+    p = reversed_joint(p, 'sph_y')
+    mech = cog_id_ros.Mechanism.from_parameters(p)
+    assert [(c.parent, c.child) for c in mech.spherical_chains] == [('coupler', 'crank')]
     check_as_written(mech, as_written(p, monkeypatch), 'spatial_rsur.yaml')
 
 

@@ -306,3 +306,17 @@ def test_a_non_ascii_digit_is_named_as_not_a_number(tmp_path):
         read(write(tmp_path, text))
     assert info.value.row == 2 and info.value.column == 'joint3.position'
     assert "'\uff11' is not a number" in str(info.value)
+
+
+def test_any_joint_name_round_trips_through_the_csv_files(tmp_path):
+    """Issue 23: a joint name is any name ('/', a leading digit, ',', '"', non-ASCII); the
+    output header quotes what CSV needs quoted, and an input header read back finds the
+    joints by their names."""
+    odd = ['motor/1', '2nd,arm "left"', 'pivot_\u00e4']
+    text = ''.join(tio.format_efforts(np.array([0.0, 0.1]), np.ones((2, 3)), None, odd))
+    path = write(tmp_path, text, 'efforts.csv')
+    header, _, efforts = tio.read_efforts(path)
+    assert header == ['time'] + [f'{name}.effort' for name in odd]
+    assert efforts.shape == (2, 3)
+    traj = tio.read_trajectory(write(tmp_path, text.replace('.effort', '.position')), odd, odd)
+    np.testing.assert_array_equal(traj.columns['2nd,arm "left".position'], [1.0, 1.0])

@@ -216,7 +216,7 @@ def play_target(probe, rclpy_context, joints, with_velocity, seconds=2.0):
     player = Player(joints, topic=f'{probe.namespace}/joint_setpoint',
                     node_name=f'player{probe.namespace.replace("/", "_")}', context=rclpy_context)
     try:
-        assert player.wait_for_node()
+        assert player.wait_for_subscriber()
         t = np.arange(0.0, seconds + 5e-4, 1e-3)
         th, thd, _ = target(t)
         q = np.repeat(th[:, None], len(joints), axis=1)

@@ -3,8 +3,9 @@ closures (docs/urdf.md).
 
 Nodes run as subprocesses (cwd: the repository, conftest.py) on config/crank_rocker_urdf.yaml
 (``mechanism.urdf_file`` relative to the params file, not to the working directory), on a
-params file with the URDF as the string ``robot_description``, and with ``effort_limits``
-given. Each serves torques equal to the API's (Mechanism.from_params_file) and publishes
+params file with the URDF as the string ``robot_description``, with ``effort_limits``
+given, and on config/five_bar_robot.yaml (a URDF with ``mechanism.loop_closure_file``,
+joint names with '/'). Each serves torques equal to the API's (Mechanism.from_params_file) and publishes
 joint_states by the mechanism's joint names; the effort limit defaults to the URDF's
 ``<limit effort>`` and the node's parameter wins over it.
 """
@@ -31,6 +32,8 @@ from cog_id_ros.ros.player import RECORDER_QOS  # noqa: E402
 NS = 1_000_000_000
 CONFIG = os.path.join('config', 'crank_rocker_urdf.yaml')
 URDF = os.path.join(REPO, 'config', 'crank_rocker.urdf')
+#: a URDF with a loop-closure file (docs/loading_a_closed_loop_urdf.md), names with '/'
+FIVE_BAR = os.path.join('config', 'five_bar_robot.yaml')
 #: crank positions (rad) and rates (rad/s) sent: each setpoint starts a stream of its own
 #: (stamps 0.15 s apart, more than max_setpoint_interval), so it is served at its own
 #: velocity and zero acceleration, which the API computes alike
@@ -96,6 +99,7 @@ def nodes(ros_process, rclpy_context, tmp_path_factory):
         'file': [CONFIG],
         'description': [described],
         'limited': [CONFIG, '-p', 'effort_limits:=[0.3]'],
+        'loops': [FIVE_BAR],
     }
     procs = {key: ros_process(['cog_id_node', '--ros-args', '--params-file', *args,
                                '-r', f'__ns:=/urdf_{key}', '-p', 'setpoint_timeout:=0.0',
@@ -163,3 +167,39 @@ def test_the_urdf_file_is_relative_to_the_params_file_that_gives_it(tmp_path):
     assert urdf_base_dir(['--ros-args', '-p', 'mechanism.urdf_file:=x.urdf', '--params-file',
                           config], 'cog_id_node') == here
     assert urdf_base_dir(None, 'cog_id_node') is None
+
+
+def test_the_node_serves_a_urdf_with_its_loop_closure_file(nodes):
+    """config/five_bar_robot.yaml: both files relative to the params file; the actuators
+    from the file's name_mot; names with '/' in joint_effort and joint_states."""
+    procs, probes = nodes
+    probe, proc = probes['loops'], procs['loops']
+    mechanism = cog_id_ros.Mechanism.from_params_file(os.path.join(REPO, FIVE_BAR))
+    solver = cog_id_ros.InverseDynamics(mechanism)
+    assert "mechanism 'five_bar_robot'" in proc.output
+    start = time.time_ns()
+    sent = [(start + k * 150_000_000, [0.1 * k, -0.05 * k], [0.5, -0.3 * k]) for k in range(3)]
+    for stamp, q, v in sent:
+        msg = JointState()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, NS)
+        msg.name, msg.position, msg.velocity = ['motor/1', 'motor/2'], q, v
+        probe.setpoints.publish(msg)
+    assert wait_until(lambda: len(probe.efforts) >= len(sent)), proc.output
+    got = {m.header.stamp.sec * NS + m.header.stamp.nanosec: m for m in probe.efforts}
+    for stamp, q, v in sent:
+        assert list(got[stamp].name) == ['motor/1', 'motor/2']
+        np.testing.assert_allclose(got[stamp].effort, solver.torques([q], [v], [[0.0, 0.0]])[0],
+                                   rtol=1e-12, atol=1e-12)
+    assert wait_until(lambda: len(probe.states) >= len(sent))
+    assert list(probe.states[-1].name) == mechanism.joints == \
+        ['motor/1', 'elbow/1', 'motor/2', 'elbow/2']
+
+
+def test_the_loop_closure_file_is_relative_to_the_params_file_that_gives_it():
+    here = os.path.join(REPO, 'config')
+    five_bar = os.path.join(REPO, FIVE_BAR)
+    assert urdf_base_dir(['--ros-args', '--params-file', five_bar], 'cog_id_node',
+                         'mechanism.loop_closure_file') == here
+    assert urdf_base_dir(['--ros-args', '--params-file', five_bar, '-p',
+                          'mechanism.loop_closure_file:=x.yaml'], 'cog_id_node',
+                         'mechanism.loop_closure_file') is None
