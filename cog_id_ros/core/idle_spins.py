@@ -30,6 +30,8 @@ from . import kinematics as kin
 from . import spatial as sp
 from . import spherical_chains
 from .errors import MechanismConfigError
+from .parameters import ParameterReader
+from .value_types import FloatArray, MechanismLike
 
 #: the values of mechanism.idle_spins, the default first
 IDLE_SPINS = ('refuse', 'lock')
@@ -43,7 +45,7 @@ TIE = 1e-9
 OFF_AXIS = 1e-9
 
 
-def read_locks(mech, r):
+def read_locks(mech: MechanismLike, r: ParameterReader) -> None:
     """``mech.locked_joints`` and ``mech.idle_spins`` from mechanism.locked_joints and
     mechanism.idle_spins (a parameters.ParameterReader), checked; ``mech.locked_index``
     their indices into ``mech.joints``."""
@@ -91,13 +93,13 @@ class Spin:
     (ties in joint order), ``offset`` the distance of its centre of mass from the axis (m)."""
     link: int
     balls: tuple
-    rates: np.ndarray
+    rates: FloatArray
     offset: float
     length: float
     shares: list = field(default_factory=list)
 
 
-def with_locks(mech, matrix: np.ndarray) -> np.ndarray:
+def with_locks(mech: MechanismLike, matrix: FloatArray) -> FloatArray:
     """The closure Jacobian A with a unit row per locked joint: the equations of the
     mechanism with its locked joints held (A itself when none is)."""
     if not mech.locked_index:
@@ -106,12 +108,12 @@ def with_locks(mech, matrix: np.ndarray) -> np.ndarray:
     return np.vstack([matrix.reshape(-1, n), np.eye(n)[mech.locked_index]])
 
 
-def held(mech) -> set:
+def held(mech: MechanismLike) -> set:
     """The coordinates held at load: the actuators and the locked joints."""
     return set(mech.active_index) | set(mech.locked_index)
 
 
-def resolve(mech, matrix: np.ndarray, rank: int, dof: int) -> None:
+def resolve(mech: MechanismLike, matrix: FloatArray, rank: int, dof: int) -> None:
     """Called when the actuators and locked joints leave free motion (A the closure
     Jacobian at the assembled pose, of that rank with the locks, ``dof`` degrees of
     freedom): LockThem with ``idle_spins: lock`` when that motion is idle spins with a
@@ -134,7 +136,7 @@ def resolve(mech, matrix: np.ndarray, rank: int, dof: int) -> None:
     raise MechanismConfigError(parameter, _refusal(mech, spins))
 
 
-def free_motions(mech, matrix: np.ndarray) -> np.ndarray:
+def free_motions(mech: MechanismLike, matrix: FloatArray) -> FloatArray:
     """(n_coordinates, k): an orthonormal basis of the coordinate rates that keep the
     loops closed with every actuator and locked joint held."""
     n = mech.n_coordinates
@@ -148,12 +150,12 @@ def free_motions(mech, matrix: np.ndarray) -> np.ndarray:
     return basis
 
 
-def _balls(mech):
+def _balls(mech: MechanismLike) -> tuple[dict, list]:
     """Per link index: [(joint names, centre in the link frame, helper link indices)] of
     its ball joints (native spherical ones and chains of three revolutes); and per link
     index how many joints it has."""
     degree = [0] * len(mech.links)
-    balls = {}
+    balls: dict = {}
     for spec in mech.joint_specs + mech.closure_specs:
         for link, centre in ((spec.parent, spec.parent_xyz), (spec.child, spec.child_xyz)):
             if link < 0:
@@ -170,7 +172,7 @@ def _balls(mech):
     return balls, degree
 
 
-def find_spins(mech, basis: np.ndarray) -> list:
+def find_spins(mech: MechanismLike, basis: FloatArray) -> list:
     """The idle spins (Spin) within the free motions ``basis`` (free_motions)."""
     if not basis.shape[1]:
         return []
@@ -211,7 +213,7 @@ def find_spins(mech, basis: np.ndarray) -> list:
     return spins
 
 
-def _shares(mech, rates):
+def _shares(mech: MechanismLike, rates: FloatArray) -> list:
     """(joint index, |rate|) of the passive joints a unit spin moves, largest first (ties:
     joint order)."""
     keep = held(mech)
@@ -223,7 +225,7 @@ def _shares(mech, rates):
     return sorted(shares, key=lambda item: (item[1] < top * (1.0 - TIE), -item[1], item[0]))
 
 
-def other_motion(mech, basis: np.ndarray, spins: list):
+def other_motion(mech: MechanismLike, basis: FloatArray, spins: list) -> 'str | None':
     """None when the spins make up all of the free motion ``basis``; else the message of
     the refusal: what else moves with every actuator held."""
     k = basis.shape[1]
@@ -252,11 +254,11 @@ def other_motion(mech, basis: np.ndarray, spins: list):
                    'pose there (change initial_positions)')
 
 
-def _spin_list(mech, spins):
+def _spin_list(mech: MechanismLike, spins: list) -> str:
     return ', '.join(f"'{mech.links[spin.link]}'" for spin in spins)
 
 
-def _choose(mech, spins):
+def _choose(mech: MechanismLike, spins: list) -> tuple[list, list]:
     """(joint indices, assembly notes): one joint per spin, the largest share first."""
     chosen, notes = [], []
     for spin in spins:
@@ -280,15 +282,15 @@ def _choose(mech, spins):
     return chosen, notes
 
 
-def _ball_names(spin):
+def _ball_names(spin: Spin) -> str:
     return ' and '.join(', '.join(names) for names in spin.balls)
 
 
-def _names(mech, shares, skip=None):
+def _names(mech: MechanismLike, shares: list, skip: 'int | None' = None) -> str:
     return ', '.join(f"'{mech.joints[j]}' ({share:.3g})" for j, share in shares if j != skip)
 
 
-def _refusal(mech, spins):
+def _refusal(mech: MechanismLike, spins: list) -> str:
     """The refusal of idle spins: each link, the joints that could be locked, what to write."""
     parts, picks = [], []
     for spin in spins:
@@ -315,7 +317,7 @@ def _refusal(mech, spins):
     return text
 
 
-def dependent_actuators(mech, matrix: np.ndarray) -> list:
+def dependent_actuators(mech: MechanismLike, matrix: FloatArray) -> list:
     """Names of the actuators whose motions determine each other's with the loops closed
     (and the locked joints held): those that some combination of actuator rates that no
     motion of the mechanism gives involves. Empty unless the mechanism is redundant."""
@@ -329,7 +331,7 @@ def dependent_actuators(mech, matrix: np.ndarray) -> list:
     return [mech.active_joints[a] for a in involved]
 
 
-def _null_rows(a: np.ndarray) -> np.ndarray:
+def _null_rows(a: FloatArray) -> FloatArray:
     """Orthonormal rows spanning the null space of ``a`` (relative tolerance 1e-9)."""
     _, values, vt = np.linalg.svd(a)
     scale = max(1.0, values[0]) if values.size else 1.0

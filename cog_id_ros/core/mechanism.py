@@ -79,6 +79,12 @@ NAME_REFUSED = re.compile(r'[\x00-\x1f\x7f-\x9f]')
 class Mechanism:
     """Links, joints and actuators of a (closed-link) mechanism; see docs/mechanism.md."""
 
+    #: read by idle_spins.read_locks: the joints held at their initial positions (names,
+    #: and indices into ``joints``; idle_spins: lock adds its own), and mechanism.idle_spins
+    locked_joints: list
+    locked_index: list
+    idle_spins: str
+
     def __init__(self, params: Mapping[str, Any], _chains: Iterable[SphericalChain] = ()) -> None:
         reader = ParameterReader(params)
         self.parameters = dict(reader.params)
