@@ -1,4 +1,5 @@
-"""cog_id_ros.ros: the ROS 2 face (needs rclpy): the node ``cog_id_node`` and its parts.
+"""cog_id_ros.ros: the ROS 2 face (needs rclpy): the nodes ``cog_id_node`` and
+``cog_sim_node`` and their parts.
 
   node.py              the node's wiring: topics, timers, the callback that serves a setpoint
   main.py              ``cog_id_node``'s main (stop signals while it imports, usage, start-up)
@@ -17,6 +18,14 @@
   startup.py           run a node: stop signals during start-up, spin, exit status
   command_line.py      --params-file checks and rcl's messages, naming the parameter
   stop_signals.py      SIGINT / SIGTERM during start-up
+  sim_node.py          ``cog_sim_node``'s wiring: the mechanism simulated, efforts in, joint
+                       states out (the physics: ``cog_id_ros.Simulation``)
+  sim_main.py          ``cog_sim_node``'s main (main.py's, with its own usage)
+  sim_parameters.py    its own parameters (one table; the shared ones are cog_id_node's entries)
+  sim_topics.py        its topics and ~/reset (one table)
+  sim_efforts.py       effort messages checked (or rejected by reason), then held
+  sim_loop.py          the integration thread: paced steps, joint_states and /clock, reset
+  sim_diagnostics.py   what it counts and its /diagnostics status
   player.py            ``cog_id_player``: a CSV trajectory published as setpoints
   recorder.py          the efforts recorded in a process of their own, and the account of a
                        run: every setpoint answered and recorded, or where it went

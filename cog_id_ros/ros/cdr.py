@@ -1,4 +1,5 @@
-"""The serialized (CDR) form of std_msgs/Float64MultiArray, built with ``struct``.
+"""The serialized (CDR) form of std_msgs/Float64MultiArray (and rosgraph_msgs/Clock),
+built with ``struct``.
 
 rclpy's ``Publisher.publish`` also takes a message already serialized (``bytes``) and
 publishes it as it is. For the node's ``effort_command`` that skips rclpy's conversion of
@@ -45,3 +46,13 @@ def float64_multiarray_packer(n: int) -> Callable[..., bytes]:
     """``pack(*values) -> bytes``: the serialized Float64MultiArray of exactly ``n`` floats
     (one C call, for a hot path that always sends ``n``; ``struct.error`` for another n)."""
     return functools.partial(struct.Struct(f'<4sIII4x{n}d').pack, CDR_LE, 0, 0, n)
+
+
+#: rosgraph_msgs/Clock: the encapsulation, then ``clock`` (int32 sec, uint32 nanosec)
+_CLOCK = struct.Struct('<4siI')
+
+
+def clock(stamp_ns: int) -> bytes:
+    """The serialized rosgraph_msgs/Clock of ``stamp_ns`` (>= 0): 12 bytes, one struct
+    call (cog_sim_node publishes one after every step)."""
+    return _CLOCK.pack(CDR_LE, *divmod(stamp_ns, 1_000_000_000))

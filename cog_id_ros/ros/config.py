@@ -7,11 +7,11 @@ the spawned process pickled). Every parameter of the table is an attribute by it
 the node's constructor.
 """
 import dataclasses
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
-from .parameters import NODE_PARAMETERS
+from .parameters import NODE_PARAMETERS, NodeParameter
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -27,9 +27,11 @@ class NodeConfig:
     values: dict[str, Any]
 
     @classmethod
-    def declare(cls, node: Any, overrides: dict[str, Any], mechanism: Any) -> 'NodeConfig':
-        """Declare every parameter of NODE_PARAMETERS on ``node`` (a ReadOnlyNode) read-only,
-        given or by default, and make the configuration of ``mechanism`` from them.
+    def declare(cls, node: Any, overrides: dict[str, Any], mechanism: Any,
+                table: Mapping[str, NodeParameter] = NODE_PARAMETERS) -> 'NodeConfig':
+        """Declare every parameter of ``table`` (NODE_PARAMETERS; cog_sim_node's:
+        ``cog_id_ros.ros.sim_parameters.SIM_PARAMETERS``) on ``node`` (a ReadOnlyNode)
+        read-only, given or by default, and make the configuration of ``mechanism`` from them.
 
         The mechanism's effort limits (joints.<j>.effort, URDF <limit effort>) are the
         default of effort_limits; the node's parameter, when given, wins.
@@ -37,12 +39,13 @@ class NodeConfig:
         active_types = [mechanism.joint_types[mechanism.joints.index(j)]
                         for j in mechanism.active_joints]
         limits = getattr(mechanism, 'effort_limits', None)
-        values = node.declare_table(NODE_PARAMETERS, overrides, active_types,
+        values = node.declare_table(table, overrides, active_types,
                                     {'effort_limits': list(limits) if limits else None})
         wraps = [kind.wraps for kind in mechanism.active_kinds]
         return cls(mechanism=dict(mechanism.parameters),
                    active_joints=tuple(mechanism.active_joints),
-                   unwrap=[values['unwrap_angles'] and w for w in wraps], values=values)
+                   unwrap=[values.get('unwrap_angles', False) and w for w in wraps],
+                   values=values)
 
     def __getattr__(self, name: str) -> Any:
         # only what the dataclass does not hold itself; __dict__, not self.values: unpickling

@@ -13,6 +13,7 @@ and no traceback.
 import os
 import signal
 import sys
+from typing import Any, Callable
 
 #: the console script (setup.py); the node has the same name (node.NODE_NAME)
 PROGRAM = 'cog_id_node'
@@ -44,14 +45,24 @@ docs/parameter_file.md (the mechanism parameter file) of the cog_id_ros package.
 
 
 def main(args: list[str] | None = None) -> int:
-    """Start the node and spin until Ctrl-C or SIGTERM (exit status 0).
+    """Start the node and spin until Ctrl-C or SIGTERM (exit status 0): :func:`console_main`
+    of this node.
 
-    ``-h``/``--help`` (before ``--ros-args``): the usage, exit status 0. No parameters on
-    the command line, a parameter that cannot be honoured, or a params file rcl cannot
-    parse: exit status 2 and one line saying what to do or naming the parameter. A stop
-    signal while Python imports and the node starts stops it cleanly too (exit status 0;
-    here until rclpy is initialised, then :mod:`.startup`). A thread of the node that
-    ended by itself makes the exit status 1.
+    ``-h``/``--help`` (before ``--ros-args``): the usage, exit status 0; the rest as
+    :func:`console_main` says."""
+    return console_main(_main, args)
+
+
+def console_main(body: Callable[[list[str] | None], int], args: list[str] | None) -> int:
+    """The main of a node's console script: ``body(args)`` with stop signals in hand
+    (``body`` builds and runs the node with :func:`.startup.run`; cog_sim_node's main
+    is this too).
+
+    No parameters on the command line, a parameter that cannot be honoured, or a params
+    file rcl cannot parse: exit status 2 and one line saying what to do or naming the
+    parameter. A stop signal while Python imports and the node starts stops it cleanly
+    too (exit status 0; here until rclpy is initialised, then :mod:`.startup`). A thread
+    of the node that ended by itself makes the exit status 1.
 
     The process's main: it returns with SIGINT and SIGTERM ignored. The node is stopped by
     then, and what is left is Python's own exit (a few hundred ms: modules, DDS), during
@@ -61,7 +72,7 @@ def main(args: list[str] | None = None) -> int:
     for signum in STOP_SIGNALS:     # first: Python is still to import numpy, rclpy, ...
         signal.signal(signum, _exit_at_once)
     try:
-        return _main(args)
+        return body(args)
     finally:
         for signum in STOP_SIGNALS:
             signal.signal(signum, signal.SIG_IGN)
@@ -81,20 +92,33 @@ def _exit_at_once(signum: int, frame: object) -> None:
 
 
 def _main(args: list[str] | None) -> int:
+    return node_main(args, PROGRAM, USAGE, _cog_id_node)
+
+
+def _cog_id_node() -> tuple[str, Callable[..., Any]]:
+    from .node import NODE_NAME, CogIdNode
+    return NODE_NAME, CogIdNode
+
+
+def node_main(args: list[str] | None, program: str, usage: str,
+              node: Callable[[], tuple[str, Callable[..., Any]]]) -> int:
+    """The body of a node's console script: ``--help``, the check that parameters are
+    given, then :func:`.startup.run` of the node ``node()`` names and builds
+    ((its name, its class); imported there, after the stop signals are in hand)."""
     import functools
 
     from .command_line import no_parameters_problem, node_arguments, wants_help
-    from .node import NODE_NAME, CogIdNode
     from .startup import cannot_start, run
 
     argv = node_arguments(args)
     if wants_help(argv):
-        print(USAGE, end='')
+        print(usage, end='')
         return 0
-    problem = no_parameters_problem(argv, PROGRAM)
+    problem = no_parameters_problem(argv, program)
     if problem:
-        return cannot_start(NODE_NAME, problem)
-    return run(NODE_NAME, functools.partial(CogIdNode, command_line=argv), args)
+        return cannot_start(program, problem)     # the node's name is the program's
+    name, node_class = node()
+    return run(name, functools.partial(node_class, command_line=argv), args)
 
 
 if __name__ == '__main__':

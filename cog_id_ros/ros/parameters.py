@@ -132,7 +132,8 @@ def _check_number(param: NodeParameter, value: Any, active_types: list[str]) -> 
         extra = ''
         if param.special is not None:
             extra = f' (or {_plain(param.special[0])}: {param.special[1]})'
-        param.fail(f'must be from {param.low:g} to {param.high:g} {param.unit}{extra}, '
+        unit = f' {param.unit}' if param.unit else ''
+        param.fail(f'must be from {param.low:g} to {param.high:g}{unit}{extra}, '
                    f'got {value!r}')
     return value
 
@@ -320,14 +321,16 @@ OTHER_PARAMETERS = (
 )
 
 
-def markdown_table() -> str:
-    """docs/node.md's parameter table, generated from NODE_PARAMETERS and OTHER_PARAMETERS."""
+def markdown_table(table: dict[str, NodeParameter] | None = None,
+                   others: Sequence[tuple[str, ...]] = OTHER_PARAMETERS) -> str:
+    """docs/node.md's parameter table, generated from ``table`` (NODE_PARAMETERS) and
+    ``others`` (OTHER_PARAMETERS); cog_sim_node's (docs/sim_node.md) from its own."""
     rows = ['| name | type | default | accepted values | meaning |', '|---|---|---|---|---|']
-    for p in NODE_PARAMETERS.values():
+    for p in (NODE_PARAMETERS if table is None else table).values():
         unit = f', {p.unit}' if p.unit else ''
         rows.append(f'| `{p.name}` | {p.type}{unit} | {p.default_cell()} | {p.bounds_text()} '
                     f'| {p.description} |')
-    for name, kind, default, accepted, meaning in OTHER_PARAMETERS:
+    for name, kind, default, accepted, meaning in others:
         rows.append(f'| {name} | {kind} | {default} | {accepted} | {meaning} |'
                     .replace('<publisher|subscription>', '<publisher\\|subscription>')
                     .replace('<history|depth|reliability>', '<history\\|depth\\|reliability>'))

@@ -10,6 +10,7 @@ import pytest
 
 pytest.importorskip('rclpy')
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from cog_id_ros.ros import cdr  # noqa: E402
@@ -63,3 +64,13 @@ def test_accepts_tuples_numpy_and_ints():
     assert cdr.float64_multiarray(tuple(data)) == expected
     assert cdr.float64_multiarray(np.array(data)) == expected
     assert cdr.float64_multiarray([1, -0.0, math.inf]) == expected
+
+
+@pytest.mark.parametrize('stamp_ns', [0, 1, 999_999_999, 1_000_000_000, 1_500_000_000,
+                                      (2 ** 31 - 1) * 1_000_000_000 + 999_999_999])
+def test_clock_same_bytes_as_rclpy(stamp_ns):
+    msg = Clock()
+    msg.clock.sec, msg.clock.nanosec = divmod(stamp_ns, 1_000_000_000)
+    assert cdr.clock(stamp_ns) == serialize_message(msg)
+    back = deserialize_message(cdr.clock(stamp_ns), Clock)
+    assert back.clock.sec * 1_000_000_000 + back.clock.nanosec == stamp_ns
