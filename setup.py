@@ -36,6 +36,7 @@ setup(
             'cog_id_player = cog_id_ros.ros.player:main',
             'cog_id_demo = cog_id_ros.demos.table:main',
             'cog_id_inspect = cog_id_ros.offline.inspect:main',
+            'cog_id_simulate = cog_id_ros.offline.simulate:main',
         ],
     },
 )

@@ -1,6 +1,7 @@
 """Speed of forward dynamics and of the simulator, side by side with InverseDynamics.torques.
 
     .venv/bin/python bench/bench_forward.py          (also run by ./dev bench)
+    .venv/bin/python bench/bench_forward.py paper_four_bar_a stewart_6ups   (only these)
 
 For each example mechanism (config/*.yaml) and backend ('native' where a C compiler is
 there, and 'python'):
@@ -90,8 +91,10 @@ def simulate(mech, backend, q, qd, tau, steps, runs=3):
     return statistics.median(times), max(cpu), max(wall)
 
 
-def main():
+def main(names=()):
     paths = sorted(glob.glob(os.path.join(HERE, '..', 'config', '*.yaml')))
+    if names:
+        paths = [p for p in paths if os.path.basename(p)[:-len('.yaml')] in names]
     probe = cog_id_ros.InverseDynamics(cog_id_ros.Mechanism.from_params_file(paths[0]))
     backends = ['native', 'python'] if probe.backend == 'native' else ['python']
     print('command: .venv/bin/python bench/bench_forward.py   (one sample [us]: medians; '
@@ -120,4 +123,4 @@ def ids_torques(mech, backend, q, qd, qdd):
 
 
 if __name__ == '__main__':
-    main()
+    main(sys.argv[1:])

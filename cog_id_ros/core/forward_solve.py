@@ -8,19 +8,18 @@ nothing is computed twice. What can go wrong is what can go wrong for the torque
 singular inertia (:data:`forward_dynamics.INERTIA_CONDITION_LIMIT`).
 """
 import math
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import Any, Optional, Sequence, Tuple, cast
 
 import numpy as np
 
 from .batch import Batch
+from .continuation import State
 from .errors import CogIdError, SetpointError, SingularConfigurationError
 from .forward_dynamics import INERTIA_CONDITION_LIMIT
 from .inputs import check_values
 from .kernels import ForwardRecord
 from .mechanism import Mechanism
 from .sample_solve import SampleSolver
-
-State = Tuple[List[float], List[List[float]]]     # (q, V): sample_solve.SampleSolver's state
 
 #: what forward dynamics calls its inputs in messages (inputs.LABELS for the torques)
 LABELS = ('q', 'qd', 'tau')
@@ -32,6 +31,7 @@ class ForwardSolver:
     def __init__(self, mechanism: Mechanism, kernels: Any, continuation_step: float,
                  joints_at: Any) -> None:
         self.mechanism = mechanism
+        self.kernels = kernels = kernels.with_forward()     # (made now on first use)
         self.serial = SampleSolver(mechanism, kernels, continuation_step, whole='forward')
         self.batch = Batch(mechanism, self.serial, joints_at)
 
@@ -43,7 +43,7 @@ class ForwardSolver:
         others follow (SampleSolver.solve). Raises as torques does, and for a singular
         inertia or accelerations that are not finite."""
         record, new_state = self.serial.solve(state, q, qd, tau, sample, project)
-        return checked(self.mechanism, record, qd, tau, sample), new_state
+        return checked(self.mechanism, cast(ForwardRecord, record), qd, tau, sample), new_state
 
     def again(self, state: State, qd: Sequence[float], tau: Sequence[float],
               sample: Optional[int] = None) -> ForwardRecord:
@@ -58,9 +58,9 @@ class ForwardSolver:
         """(accelerations (N, M), new state) of N > 1 samples; raises for the first sample
         that cannot be served (the warm start is then the caller's, unchanged)."""
         m = self.mechanism
-        _, errors = check_values(m, self.serial.wrapping, q, qd, tau, False, labels=LABELS)
-        if errors:
-            raise errors[min(errors)]
+        _, refused = check_values(m, self.serial.wrapping, q, qd, tau, False, labels=LABELS)
+        if refused:
+            raise refused[min(refused)]
         with np.errstate(all='ignore'):
             record, _, ok, errors, new_state = self.batch.positions(state, q, 'raise',
                                                                     qd=qd, qdd=tau)

@@ -57,8 +57,8 @@ class InverseDynamics:
         self._serial = SampleSolver(solved, kernels, self.continuation_step)
         self._batch = Batch(solved, self._serial, mechanism.joints_at)
         self._poses = PoseSolver(mechanism, self._serial, self._batch)
-        self._forward = ForwardSolver(solved, kernels, self.continuation_step,
-                                      mechanism.joints_at)
+        self._kernels = kernels
+        self._forward: Optional[ForwardSolver] = None     # made on first use
         self.reset()
 
     @property
@@ -98,6 +98,9 @@ class InverseDynamics:
         """
         positions, rates_in, efforts, single = setpoints(
             self.mechanism, self._serial.wrapping, q, qd, tau, labels=LABELS)
+        if self._forward is None:       # (its kernels are loaded, or built, now)
+            self._forward = ForwardSolver(self._solved, self._kernels, self.continuation_step,
+                                          self.mechanism.joints_at)
         if single:
             record, self._state = self._forward.one(self._state, positions, rates_in, efforts)
             return np.array(record.accelerations)

@@ -100,16 +100,16 @@ class PoseRecord(NamedTuple):
 
 class ForwardRecord(NamedTuple):
     """A PoseRecord with the accelerations of forward dynamics in place of the torques."""
-    residual: tuple
-    cosines: tuple
-    increment: tuple
+    residual: Lanes
+    cosines: Lanes
+    increment: Lanes
     worst: float
     least_cosine: float
     largest_step: float
     condition: float
-    accelerations: tuple  # thetaddot the efforts produce, active_joints order
-    basis: tuple
-    projection: tuple
+    accelerations: Lanes  # thetaddot the efforts produce, active_joints order
+    basis: Lanes
+    projection: Lanes
     inertia_condition: float  # of the inertia in the independent coordinates (forward_dynamics.py)
 
 
@@ -216,6 +216,14 @@ class ReferenceKernels:
         both), and a mechanism and its kernels go together."""
         return self._mechanism()
 
+    #: one Simulation step in C: compiled kernels only (NativeKernels)
+    rk4_step: Any = None
+
+    def with_forward(self) -> 'ReferenceKernels':
+        """These kernels, with the forward kernel ready (traced or compiled on first use by
+        the backends that make it: a solver that only serves torques never makes it)."""
+        return self
+
     def prediction(self, q: Sequence[float], basis: Any,
                    goal: Sequence[float]) -> PredictionRecord:
         return prediction_record(self.mechanism, q, basis, goal)
@@ -241,68 +249,113 @@ class ReferenceKernels:
 
     def forward_many(self, q: FloatArray, target: FloatArray, qd: FloatArray,
                      tau: FloatArray) -> FloatArray:
-        return flat(forward_record(self.mechanism, *map(columns, (q, target, qd, tau)),
-                                   sp.ArrayOps), len(q))
+        return flat(forward_record(self.mechanism, columns(q), columns(target), columns(qd),
+                                   columns(tau), sp.ArrayOps), len(q))
 
 
-def trace(mechanism: 'Mechanism') -> list[Traced]:
-    """The four kernels run once on symbolic lanes: [(name, params, record type, fields)], what
-    the emitters (emitter.py) write as code."""
+#: the kernels every solver loads (the torques), and those made on first use by forward
+#: dynamics and the simulator (a second library: a solver that only serves torques does not
+#: trace or compile them)
+TORQUE_KERNELS = ('prediction', 'closure', 'dynamics')
+FORWARD_KERNELS = ('prediction', 'closure', 'forward')
+
+
+def trace(mechanism: 'Mechanism', kinds: Sequence[str] = TORQUE_KERNELS) -> list[Traced]:
+    """The kernels ``kinds`` run once on symbolic lanes: [(name, params, record type,
+    fields)], what the emitters (emitter.py) write as code."""
     m = mechanism
     graph = Graph()
     q = graph.inputs('q', m.n_coordinates)
+    effort = 'tau' if 'forward' in kinds else 'qdd'      # dynamics' qdd, forward's tau
     target, qd, qdd = (graph.inputs(name, len(m.active_joints))
-                       for name in ('target', 'qd', 'qdd'))
-    tau = graph.inputs('tau', len(m.active_joints))
+                       for name in ('target', 'qd', effort))
     flat = graph.inputs('basis', m.n_coordinates * m.dof)
     basis = [flat[j * m.dof:(j + 1) * m.dof] for j in range(m.n_coordinates)]
-    predicted = prediction_record(m, q, basis, target)
-    _, closed = closure_record(m, q, SymOps)
-    whole = pose_record(m, q, target, qd, qdd, SymOps)
-    forward = forward_record(m, q, target, qd, tau, SymOps)
-    return [('prediction', [('q', q), ('basis', basis), ('goal', target)], PredictionRecord,
-             list(zip(PredictionRecord._fields, predicted))),
-            ('closure', [('q', q)], ClosureRecord, list(zip(ClosureRecord._fields, closed))),
-            ('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)], PoseRecord,
-             list(zip(PoseRecord._fields, whole))),
-            ('forward', [('q', q), ('target', target), ('qd', qd), ('tau', tau)], ForwardRecord,
-             list(zip(ForwardRecord._fields, forward)))]
+    out: list[Any] = []
+    for kind in kinds:
+        if kind == 'prediction':
+            out.append(('prediction', [('q', q), ('basis', basis), ('goal', target)],
+                        PredictionRecord, list(zip(PredictionRecord._fields,
+                                                   prediction_record(m, q, basis, target)))))
+        elif kind == 'closure':
+            out.append(('closure', [('q', q)], ClosureRecord,
+                        list(zip(ClosureRecord._fields, closure_record(m, q, SymOps)[1]))))
+        elif kind == 'dynamics':
+            out.append(('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)],
+                        PoseRecord, list(zip(PoseRecord._fields,
+                                             pose_record(m, q, target, qd, qdd, SymOps)))))
+        else:
+            out.append(('forward', [('q', q), ('target', target), ('qd', qd), ('tau', qdd)],
+                        ForwardRecord, list(zip(ForwardRecord._fields,
+                                                forward_record(m, q, target, qd, qdd,
+                                                               SymOps)))))
+    return out
 
 
 class PythonKernels(ReferenceKernels):
     """The kernels traced into straight-line Python functions (``source`` keeps their text,
-    ``operations`` their sizes); N samples run the lane code on arrays (reference)."""
+    ``operations`` their sizes); N samples run the lane code on arrays (reference). The
+    forward kernel is traced when first used."""
     name = 'python'
 
     def __init__(self, mechanism: 'Mechanism', traced: Sequence[Traced] | None = None) -> None:
         super().__init__(mechanism)
         self.source: dict[str, str] = {}
         self.operations: dict[str, int] = {}
-        for name, params, record, fields in traced or trace(mechanism):
+        self._add(trace(mechanism) if traced is None else traced)
+
+    def _add(self, traced: Sequence[Traced]) -> None:
+        for name, params, record, fields in traced:
             function, self.source[name], self.operations[name] = python_function(
                 name, params, record, fields)
             setattr(self, name, function)
+
+    def with_forward(self) -> 'PythonKernels':
+        if 'forward' not in self.source:        # traced on first use
+            self._add(trace(self.mechanism, ('forward',)))
+        return self
 
 
 class NativeKernels(ReferenceKernels):
     """The kernels compiled from C (native.py): a library per mechanism, cached on disk by a
     hash of what the kernels are made of (:func:`kernel_key`), so a cached mechanism loads
-    without tracing. N samples run the same C in a loop. Raises
-    native.NativeUnavailable when they cannot be had."""
+    without tracing. N samples run the same C in a loop. Forward dynamics and the simulator
+    step (``forward``, ``rk4_step``) are a second library of the mechanism, loaded (or
+    built) when first used. Raises native.NativeUnavailable when they cannot be had."""
     name = 'native'
 
     def __init__(self, mechanism: 'Mechanism') -> None:
         super().__init__(mechanism)
         module, self.operations = native.load_module(kernel_key(mechanism), self._source)
-        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord, ForwardRecord)
+        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
         # the compiled functions stand in for the lane code's methods
         self.prediction = module.prediction                                 # type: ignore[method-assign]
         self.closure, self.dynamics = module.closure, module.dynamics     # type: ignore[method-assign]
-        self.forward = module.forward                                       # type: ignore[method-assign]
-        #: one Simulation step in C (native_simulation.py)
-        self.rk4_step = module.rk4_step
         self.module = module
+        self.modules: dict[str, Any] = dict.fromkeys(TORQUE_KERNELS, module)
         self.widths = {name: width(layout) for name, layout in self.layouts.items()}
+
+    def with_forward(self) -> 'NativeKernels':
+        """``forward`` and ``rk4_step`` (one Simulation step in C, native_simulation.py) from
+        the second library, loaded (or built) on first use. Where it cannot be had, the
+        forward kernel is traced into Python (one log line says why), without rk4_step."""
+        if 'forward' in self.modules:
+            return self
+        m = self.mechanism
+        try:
+            module, operations = native.load_module(kernel_key(m) + ':forward',
+                                                    self._forward_source)
+        except native.NativeUnavailable as exc:
+            KERNELS.say_fallback(exc)
+            self.forward = PythonKernels(m, []).with_forward().forward  # type: ignore[method-assign]
+            self.modules['forward'] = None
+            return self
+        module.set_record_types(PredictionRecord, ClosureRecord, ForwardRecord)
+        self.operations['forward'] = operations['forward']
+        self.forward = module.forward  # type: ignore[method-assign]
+        self.rk4_step = module.rk4_step
+        self.modules['forward'] = module
+        return self
 
     def closure_many(self, q: FloatArray) -> FloatArray:
         return self._many('closure', q)
@@ -313,20 +366,30 @@ class NativeKernels(ReferenceKernels):
 
     def forward_many(self, q: FloatArray, target: FloatArray, qd: FloatArray,
                      tau: FloatArray) -> FloatArray:
+        if self.with_forward().modules['forward'] is None:
+            return super().forward_many(q, target, qd, tau)
         return self._many('forward', q, target, qd, tau)
 
     def _many(self, name: str, *arrays: FloatArray) -> FloatArray:
         contiguous = [np.ascontiguousarray(a, dtype=float) for a in arrays]
         out = np.empty((len(contiguous[0]), self.widths[name]))
-        getattr(self.module, name + '_many')(*contiguous, out)
+        getattr(self.modules[name], name + '_many')(*contiguous, out)
         return out
 
     def _source(self, module: str) -> tuple[str, dict[str, int]]:
         """(C source of the module, operations per kernel): traced here, only when the
         library must be built, and not kept (a large mechanism's trace is tens of MB)."""
+        return c_module_source(module, [(name, params, record.__name__, fields)
+                                        for name, params, record, fields in
+                                        trace(self.mechanism)])
+
+    def _forward_source(self, module: str) -> tuple[str, dict[str, int]]:
+        """The same for the second library: the forward kernel, the two it is closed with,
+        and the Simulation step (native_simulation.py)."""
         m = self.mechanism
         return c_module_source(module, [(name, params, record.__name__, fields)
-                                        for name, params, record, fields in trace(m)],
+                                        for name, params, record, fields in
+                                        trace(m, FORWARD_KERNELS)],
                                native_simulation.simulation_source(m, self.layouts),
                                [(name, 'sim_' + name, doc)
                                 for name, doc in native_simulation.METHODS])

@@ -94,7 +94,7 @@ def solve_spd(a: Sequence[Sequence[Lane]], rhs: Sequence[Sequence[Lane]],
     return cholesky_solve(cholesky(a, ops), rhs, ops)
 
 
-def cholesky(a, ops):
+def cholesky(a: Sequence[Sequence[Lane]], ops: Ops) -> list[list[Lane]]:
     """The lower Cholesky factor L of a small symmetric positive-definite A, A = L L^T
     (list of rows of lanes; a pivot that is not positive gives NaN, as ops.sqrt does)."""
     n = len(a)
@@ -111,7 +111,8 @@ def cholesky(a, ops):
     return lower
 
 
-def cholesky_solve(lower, rhs, ops):
+def cholesky_solve(lower: Sequence[Sequence[Lane]], rhs: Sequence[Sequence[Lane]],
+                   ops: Ops) -> list[list[Lane]]:
     """X with L L^T X = RHS, L from :func:`cholesky`; RHS and X lists of rows of lanes."""
     n = len(lower)
     m = len(rhs[0]) if rhs else 0

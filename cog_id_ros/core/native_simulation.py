@@ -2,17 +2,18 @@
 
 simulation.py's RK4 step calls the kernels about fifteen times and decides in Python between
 the calls; for a small mechanism the deciding costs more than the kernels. With compiled
-kernels the module also holds ``rk4_step``, the same step in C for the case the Python step
+kernels the library of the forward kernel (kernels.NativeKernels, loaded on first use)
+also holds ``rk4_step``, the same step in C for the case the Python step
 takes most often (every stage one continuation step away, closed by Newton, not singular),
 the same operations in the same order; otherwise it returns None and the Python step runs.
 This module writes the constants it is compiled with: the mechanism's sizes and joint
 indices, where each field sits in the kernels' flat outputs (kernels.layouts), and
-sample_solve.py's Newton constants.
+the Newton constants (newton.py).
 """
 from importlib import resources
 from typing import Dict, List, Sequence, Tuple
 
-from . import sample_solve
+from . import newton
 from .continuation import TWO_PI, wrapping_actuators
 from .mechanism import Mechanism
 
@@ -55,10 +56,10 @@ def simulation_source(mechanism: Mechanism, layouts: Dict[str, List[Tuple[str, t
         'SIM_OFF_LEAST': closing['least_cosine'], 'SIM_OFF_LARGEST': closing['largest_step'],
         'SIM_OFF_COND': forward['condition'], 'SIM_OFF_ACC': forward['accelerations'],
         'SIM_OFF_BASIS': forward['basis'], 'SIM_OFF_INERTIA': forward['inertia_condition'],
-        'SIM_NEWTON_ITERATIONS': sample_solve.NEWTON_ITERATIONS,
-        'SIM_NEWTON_MAX_INCREMENT': repr(float(sample_solve.NEWTON_MAX_INCREMENT)),
-        'SIM_LIKELY_CLOSED': repr(float(sample_solve.LIKELY_CLOSED)),
-        'SIM_STAGNATION': repr(float(sample_solve.STAGNATION)),
+        'SIM_NEWTON_ITERATIONS': newton.NEWTON_ITERATIONS,
+        'SIM_NEWTON_MAX_INCREMENT': repr(float(newton.NEWTON_MAX_INCREMENT)),
+        'SIM_LIKELY_CLOSED': repr(float(newton.LIKELY_CLOSED)),
+        'SIM_STAGNATION': repr(float(newton.STAGNATION)),
         'SIM_TWO_PI': repr(TWO_PI),
     }
     assert closing['worst'] == forward['worst'] and closing['increment'] == forward['increment']

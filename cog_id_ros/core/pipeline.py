@@ -87,7 +87,8 @@ def drift_accelerations(mechanism: MechanismLike, pose: Pose, s: Matrix,
     return link_drift(mechanism, pose, bias, drift)
 
 
-def joint_drift(mechanism, pose, s, thetadot):
+def joint_drift(mechanism: MechanismLike, pose: Pose, s: Matrix,
+                thetadot: Sequence[Lane]) -> tuple[list[Twist], list[Lane]]:
     """(bias, d): the links' bias accelerations (joint twists turning with their inner body)
     and the joint accelerations d that keep the loops closed when thetaddot_m = 0."""
     model = mechanism.model
@@ -98,7 +99,8 @@ def joint_drift(mechanism, pose, s, thetadot):
     return bias, closure_drift(mechanism, pose, s, beta)
 
 
-def link_drift(mechanism, pose, bias, drift):
+def link_drift(mechanism: MechanismLike, pose: Pose, bias: Sequence[Twist],
+               drift: Sequence[Lane]) -> list[Twist]:
     """The links' spatial accelerations from their bias and the joint accelerations d."""
     drift_twists = link_twists(mechanism.model, pose.frames, drift)
     return [sp.twist_add_scaled(b, d, 1.0) for b, d in zip(bias, drift_twists)]

@@ -36,30 +36,12 @@ from .continuation import (
 from .errors import ClosureError, SingularConfigurationError
 from .inputs import out_of_range
 from .joint_motion import BasisLayout, projected_pose
+from .newton import LIKELY_CLOSED, NEWTON_ITERATIONS, NEWTON_MAX_INCREMENT, STAGNATION
 from .value_types import LaneMatrix
 
 if TYPE_CHECKING:
     from .kernels import PoseRecord, ReferenceKernels
     from .mechanism import Mechanism
-
-#: Newton iterations of one continuation step (from a first-order prediction within the
-#: step limits Newton converges in a few; more means the step is too long: it is halved)
-NEWTON_ITERATIONS = 12
-
-#: largest Newton increment (rad or m) applied at once; longer ones are scaled down
-NEWTON_MAX_INCREMENT = 0.5
-
-#: after a Newton increment below this (rad or m) the loops are probably closed (Newton
-#: converges quadratically: the next residual is of the order of its square times the
-#: mechanism's curvature, below the closure tolerance at control rate), so the whole record
-#: is evaluated at once; after a larger one (a continuation step far from the pose, a batch
-#: anchor) only the closure kernel, until the increments get small
-LIKELY_CLOSED = 1e-4
-
-#: a Newton increment below this (rad or m) is checked for stagnation: below 1e-15 of the
-#: largest coordinate Newton moves (a larger one cannot be, for coordinates within
-#: MAX_ANGLE or lengths; the actuators, held, may be at any angle)
-STAGNATION = 1e-5
 
 #: Gauss-Newton iterations of the redundant projection, and the increment that ends it
 PROJECTION_ITERATIONS = 6
@@ -92,7 +74,7 @@ class SampleSolver:
 
     def solve(self, state: State, target: Sequence[float], qd: Sequence[float] | None = None,
               qdd: Sequence[float] | None = None, sample: int | None = None,
-              project: bool = True) -> tuple[Any, State]:
+              project: bool = True) -> tuple['PoseRecord', State]:
         """(PoseRecord at ``target``, new state) by continuation from ``state``. Without
         ``project``, a redundant mechanism's primary actuators are put at their targets and
         the others follow from the closure (their targets are not used)."""
@@ -165,7 +147,7 @@ class SampleSolver:
 
     def step(self, predicted: Sequence[float], goal: Sequence[float], final: bool,
              qd: Sequence[float], qdd: Sequence[float],
-             sample: int | None) -> tuple[Any, State, Sequence[float]]:
+             sample: int | None) -> tuple['PoseRecord', State, Sequence[float]]:
         """One continuation step: close the loops from ``predicted``, check, and when
         ``final`` (the final step, projected) for a redundant mechanism project onto
         ``goal``. Returns (PoseRecord, new state,
@@ -192,7 +174,7 @@ class SampleSolver:
         small increment, or when ``likely_closed``, the whole record is evaluated at once."""
         kernels, tol, free, evaluate = self.kernels, self.tolerance, self.free, self.whole
         whole = likely_closed
-        # a ClosureRecord while the loops are probably not closed, the whole kernel's once
+        # a ClosureRecord while the loops are probably not closed, a whole record once they are
         record: Any = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
             if loops_closed(record.worst, record.least_cosine, tol):

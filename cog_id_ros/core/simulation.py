@@ -73,7 +73,7 @@ class Simulation:
         self._pairs = solved.primary_pairs          # (active index, joint index) per primary
         serial = self._forward.serial
         #: the step in C (compiled kernels only) and its constants
-        self._native: Optional[Callable[..., Any]] = getattr(kernels, 'rk4_step', None)
+        self._native: Optional[Callable[..., Any]] = self._forward.kernels.rk4_step
         self._config = step_config(self.time_step, solved, INERTIA_CONDITION_LIMIT,
                                    serial.limits, serial.bounds)
         self.reset()
@@ -118,8 +118,10 @@ class Simulation:
 
     def joint_velocities(self) -> np.ndarray:
         """Every joint's velocity, ``mechanism.joints`` order, at :attr:`time`."""
-        return self.mechanism.joints_at(self._state[0], self._joint_rates(self._state,
-                                                                          self._zd))[1]
+        rates = self.mechanism.joints_at(self._state[0], self._joint_rates(self._state,
+                                                                           self._zd))[1]
+        assert rates is not None
+        return rates
 
     # --- moving -------------------------------------------------------------------------
 
@@ -132,8 +134,9 @@ class Simulation:
         m, serial = self._solved, self._forward.serial
         start = list(m.assembled_coordinates)
         zeros = [0.0] * len(m.active_joints)
+        record: Any
         q, record, _, _ = serial.close(start, [start[j] for j in m.active_index], zeros, zeros)
-        state = (list(q), serial.basis(record))
+        state: State = (list(q), serial.basis(record))
         zd = [0.0] * len(self._pairs)
         if positions is not None or velocities is not None:
             q = [q[j] for j in m.active_index] if positions is None else positions
@@ -274,9 +277,9 @@ class Simulation:
         if isinstance(exc, SingularConfigurationError):
             new: CogIdError = SingularConfigurationError(message, exc.condition_number)
         elif isinstance(exc, ClosureError):
-            new = ClosureError(message, exc.residual, reason=exc.reason)
+            new = ClosureError(message, exc.residual, reason=exc.reason or 'closure')
         elif isinstance(exc, SetpointError):
-            new = SetpointError(message, reason=exc.reason)
+            new = SetpointError(message, reason=exc.reason or 'malformed')
         else:
             return exc
         new.time, new.joint = self.time, fastest        # type: ignore[attr-defined]

@@ -1,5 +1,5 @@
 """cog_id_ros.offline: the offline face (no ROS): the CSV tool ``cog_id_torques``, the
-mechanism report ``cog_id_inspect``, and their parts.
+mechanism report ``cog_id_inspect``, the simulator ``cog_id_simulate``, and their parts.
 
 cog_id_torques:
   cli.py             the tool: its options and its run, step by step (a CSV trajectory in,
@@ -8,8 +8,8 @@ cog_id_torques:
   solving.py         the samples solved in chunks; a refused row named, or skipped
   summary.py         peak, RMS and power per joint, as a table or JSON
   outputs.py         the output paths checked first, the files written together at the end
-  progress.py        the progress bar
-  plotting.py        the torque plot
+  progress.py        the progress bar (cog_id_simulate's too)
+  plotting.py        the torque plot (and cog_id_simulate's motion plot)
 
 cog_id_inspect:
   inspect.py           the tool: its options and its run
@@ -17,6 +17,12 @@ cog_id_inspect:
   inspect_pose.py      the joint table (given beside assembled pose) and the closure there
   inspect_motion.py    --trajectory solved along the branch, with snapshots
   mechanism_plot.py    the mechanism drawn at a pose (and snapshots along a trajectory)
+
+cog_id_simulate:
+  simulate.py        the tool: its options and its run (cog_id_ros.Simulation stepped, the
+                     motion CSV, plot and summary out)
+  simulate_inputs.py the efforts CSV read, the effort each step holds (hold or line between
+                     rows), the initial state, the reference motion
 
 shared (the tools, and some with the node):
   console.py         exit statuses, one-line errors, the parser, loading, main's frame

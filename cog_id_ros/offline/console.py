@@ -61,16 +61,17 @@ def positive_float(text):
     return value
 
 
-def load_mechanism(args):
+def load_mechanism(args, solver=True):
     """(Mechanism, InverseDynamics) of the parameter file, node name and backend the command
-    line gave; ToolError (exit EXIT_PARAMS) saying why it cannot be used."""
+    line gave (without ``solver``: (Mechanism, None)); ToolError (exit EXIT_PARAMS) saying
+    why it cannot be used."""
     import cog_id_ros
     try:
         if args.node_name is None:
             mech = cog_id_ros.Mechanism.from_params_file(args.params_file)
         else:
             mech = cog_id_ros.Mechanism.from_params_file(args.params_file, args.node_name)
-        return mech, cog_id_ros.InverseDynamics(mech, backend=args.backend)
+        return mech, (cog_id_ros.InverseDynamics(mech, backend=args.backend) if solver else None)
     except cog_id_ros.CogIdError as exc:
         raise ToolError(f'{args.params_file}: {one_line(exc)}', EXIT_PARAMS) from None
     except OSError as exc:

@@ -1,4 +1,5 @@
-"""Torque plot of ``cog_id_torques``: one panel per active joint, effort against time.
+"""Plots of the offline tools: ``cog_id_torques`` (one panel per active joint, effort
+against time) and ``cog_id_simulate`` (positions against time, :func:`plot_motion`).
 
 Matplotlib's object API on the Agg canvas: no pyplot, no display, no global backend
 switch, so it works on a headless machine and inside other programs.
@@ -112,3 +113,46 @@ def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt
         head += '\n' + subtitle
     fig.suptitle(head, fontsize='large')
     fig.savefig(path, format=fmt, dpi=110)
+
+
+def plot_motion(path, time, positions, joints, units, title, subtitle=None, reference=None,
+                fmt='png'):
+    """The plot of ``cog_id_simulate``: one row per active joint, its simulated position
+    against time; with ``reference`` (same shape, NaN where it has no value) the reference
+    dashed beside it and a second column with the difference simulated - reference."""
+    from matplotlib.figure import Figure
+
+    time = np.asarray(time, dtype=float)
+    positions = np.asarray(positions, dtype=float).reshape(time.size, -1)
+    n_joints = positions.shape[1]
+    columns = 1 if reference is None else 2
+    fig = Figure(figsize=(6.0 + 4.5 * (columns - 1), 1.3 + 2.5 * n_joints),
+                 layout='constrained')
+    axes = fig.subplots(n_joints, columns, sharex=True, squeeze=False)
+    for k, (joint, unit) in enumerate(zip(joints, units)):
+        ax = axes[k, 0]
+        ax.plot(time, positions[:, k], color='C0', lw=1.6, label='simulated')
+        if reference is not None:
+            ax.plot(time, reference[:, k], color='k', lw=1.0, ls='--', label='reference')
+            diff = axes[k, 1]
+            diff.axhline(0.0, color='0.75', lw=0.8, zorder=0)
+            diff.plot(time, positions[:, k] - reference[:, k], color='C3', lw=1.2)
+            diff.set_ylabel(f'simulated \u2212 reference  [{unit}]')
+            diff.set_title(f'{joint}: difference', loc='left', fontsize='medium')
+            diff.grid(True, color='0.9', lw=0.6)
+            diff.ticklabel_format(axis='y', style='sci', scilimits=(-3, 3))
+        ax.set_ylabel(f'position  [{unit}]')
+        ax.set_title(f'{joint}', loc='left', fontsize='medium', fontweight='bold')
+        ax.grid(True, color='0.9', lw=0.6)
+        ax.legend(loc='best', fontsize='small', frameon=False)
+    for ax in axes[-1]:
+        ax.set_xlabel('time  [s]')
+        if time.size > 1:
+            ax.set_xlim(time[0], time[-1])
+    head = f'{title}: simulated motion'
+    if subtitle:
+        head += '\n' + subtitle
+    fig.suptitle(head, fontsize='medium')
+    with warnings.catch_warnings(), np.errstate(all='ignore'):
+        warnings.simplefilter('ignore', RuntimeWarning)
+        fig.savefig(path, format=fmt, dpi=110)

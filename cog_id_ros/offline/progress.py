@@ -1,5 +1,5 @@
-"""The progress bar of ``cog_id_torques``: one line on stderr, redrawn in place, for long
-inputs on a terminal."""
+"""The progress bar of the offline tools (``cog_id_torques``, ``cog_id_simulate``): one line
+on stderr, redrawn in place, for long inputs on a terminal."""
 
 import math
 import os
@@ -11,8 +11,9 @@ PROGRESS_MIN_SAMPLES = 10_000   # the bar appears for inputs over this many samp
 class ProgressBar:
     """A one-line progress bar redrawn in place with carriage returns."""
 
-    def __init__(self, total, stream, enabled, label='solving'):
+    def __init__(self, total, stream, enabled, label='solving', unit='samples'):
         self.total = total
+        self.unit = unit
         self.stream = stream
         self.enabled = enabled
         self.label = label
@@ -43,7 +44,7 @@ class ProgressBar:
         frac = done / self.total if self.total else 1.0
         rate = done / elapsed if elapsed > 0 else 0.0
         eta = (self.total - done) / rate if rate > 0 else float('nan')
-        tail = (f' {frac:4.0%} {done:,}/{self.total:,} samples  {rate:,.0f}/s'
+        tail = (f' {frac:4.0%} {done:,}/{self.total:,} {self.unit}  {rate:,.0f}/s'
                 + (f'  {eta:.0f} s left' if done < self.total and math.isfinite(eta)
                    else f'  {elapsed:.1f} s'))
         room = max(10, min(40, self._width() - len(self.label) - len(tail) - 5))

@@ -78,7 +78,8 @@ class Trajectory:
     """Parsed samples: ``time`` (N,) and ``columns`` {column name: (N,) float array}.
 
     Only the columns the tool uses are parsed. ``notes`` lists one human-readable line
-    per ignored column group.
+    per ignored column group. ``first_row``: {column name: value} of the columns read on
+    the first row only (see :func:`read_trajectory`).
     """
 
     def __init__(self, path, time, columns, notes, header):
@@ -87,6 +88,7 @@ class Trajectory:
         self.columns = columns
         self.notes = notes
         self.header = header
+        self.first_row = {}
 
     def __len__(self):
         return self.time.size
@@ -127,8 +129,9 @@ def _read_text(path):
     return text
 
 
-def _classify_header(path, names, joints, active_joints):
-    """Map the header to used columns; returns ({name: index}, notes)."""
+def _classify_header(path, names, joints, active_joints, fields=FIELDS, required='position'):
+    """Map the header to used columns (``<joint>.<field>`` for ``fields``; ``required`` the
+    field every active joint must have); returns ({name: index}, notes)."""
     joints = list(joints)
     active = list(active_joints)
     joint_set = set(joints)
@@ -147,7 +150,7 @@ def _classify_header(path, names, joints, active_joints):
             used[name] = i
             continue
         joint, dot, field = name.rpartition('.')
-        if dot and field in FIELDS:
+        if dot and field in fields:
             if joint not in joint_set:
                 raise TrajectoryError(
                     path,
@@ -164,10 +167,10 @@ def _classify_header(path, names, joints, active_joints):
         raise TrajectoryError(path, f"missing column '{TIME}' (seconds, strictly increasing)",
                               header=True, column=TIME)
     for joint in active:
-        col = joint_column(joint, 'position')
+        col = joint_column(joint, required)
         if col not in used:
             raise TrajectoryError(
-                path, f"missing column '{col}' (the position of active joint {joint})",
+                path, f"missing column '{col}' (the {required} of active joint {joint})",
                 header=True, column=col)
     notes = []
     if ignored_inactive:
@@ -175,7 +178,7 @@ def _classify_header(path, names, joints, active_joints):
                      + ': not an active joint (active: ' + ', '.join(active) + ')')
     if ignored_other:
         notes.append('ignoring column(s) ' + _name_list(ignored_other)
-                     + ': not time or <joint>.position|velocity|acceleration')
+                     + ': not time or <joint>.' + '|'.join(fields))
     return used, notes
 
 
@@ -271,9 +274,16 @@ def _locate_bad_cell(path, lines, n_columns, order, numpy_message):
     raise TrajectoryError(path, f'cannot parse: {numpy_message}', row=row)
 
 
-def read_trajectory(path: PathLike, joints: Sequence[str],
-                    active_joints: Sequence[str]) -> 'Trajectory':
+def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequence[str],
+                    fields: Sequence[str] = FIELDS, required: str = 'position',
+                    first_row: Sequence[str] = ()) -> 'Trajectory':
     """Read and validate a trajectory CSV for a mechanism (``joints``, ``active_joints``).
+
+    ``fields``: the ``<joint>.<field>`` columns read (a trajectory's position, velocity and
+    acceleration; ``cog_id_simulate`` reads an efforts file with effort, position and
+    velocity); ``required``: the field every active joint must have a column of;
+    ``first_row``: fields of ``fields`` read on the first data row only (the other rows'
+    cells are not parsed), into ``Trajectory.first_row`` {column name: float}.
 
     Raises :class:`TrajectoryError` naming the row and column of the first problem:
     a missing, duplicate or unknown column, a ragged or blank row, a cell that is not a
@@ -286,12 +296,13 @@ def read_trajectory(path: PathLike, joints: Sequence[str],
     del text   # a million-row file: keep only the lines
     if not lines:
         raise TrajectoryError(path, 'the file is empty; expected a header row such as '
-                              f"'{TIME},{joint_column(active_joints[0], 'position')}'", line=1)
+                              f"'{TIME},{joint_column(active_joints[0], required)}'", line=1)
     names = [name.strip() for name in _cells(lines[0])]
-    used, notes = _classify_header(path, names, joints, active_joints)
+    used, notes = _classify_header(path, names, joints, active_joints, fields, required)
     if len(lines) < 2:
         raise TrajectoryError(path, 'no data rows after the header', header=True)
-    order = sorted(used.items(), key=lambda kv: kv[1])
+    once = {name: i for name, i in used.items() if name.rpartition('.')[2] in first_row}
+    order = sorted(((n, i) for n, i in used.items() if n not in once), key=lambda kv: kv[1])
     if quoted:
         data = _parse_rows(path, lines, len(names), order)
     else:
@@ -315,7 +326,10 @@ def read_trajectory(path: PathLike, joints: Sequence[str],
         raise TrajectoryError(
             path, f'time {float(time[k])!r} does not increase strictly (the row before has '
             f'{float(time[k - 1])!r})', row=k + 1, column=TIME)
-    return Trajectory(path, time, columns, notes, names)
+    traj = Trajectory(path, time, columns, notes, names)
+    traj.first_row = dict(zip(once, map(float, _parse_rows(
+        path, lines[:2], len(names), list(once.items()))[0])))
+    return traj
 
 
 def format_efforts(time: np.ndarray, efforts: np.ndarray, valid: np.ndarray,

@@ -91,7 +91,8 @@ SIM_PARAMETERS: dict[str, NodeParameter] = _table(
 
 #: rows of the docs' table for parameters the node does not declare from SIM_PARAMETERS
 SIM_OTHER_PARAMETERS = (
-    *(row for row in OTHER_PARAMETERS if not row[0].startswith('`use_sim_time`')),
+    *(row[:4] + (row[4].replace('see QoS below', 'see the QoS after the topic table'),)
+      for row in OTHER_PARAMETERS if not row[0].startswith('`use_sim_time`')),
     ('`use_sim_time`', 'bool', '`false`', 'true, false',
      "rclpy's: the node's clock from `/clock` (the stamp of `/diagnostics`); the simulated "
      'time itself never depends on it; read-only like the rest'),

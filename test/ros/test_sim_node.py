@@ -397,19 +397,25 @@ def test_cog_id_node_efforts_reach_it_without_remap(ros_process, rclpy_context):
         theta = 1.0
         # a resting setpoint: cog_id_node commands the gravity torque 2 m g L cos(theta)
         expected = 2.0 * 1.0 * 9.81 * 0.5 * math.cos(theta)
-        msg = JointState(name=['joint3'], position=[theta], velocity=[0.0])
-        msg.header.stamp = probe.node.get_clock().now().to_msg()
-        setpoints.publish(msg)
         sent = time.monotonic()
 
         def applied():
             return [m for t, m in list(probe.states) if t > sent and m.effort[2] != 0.0]
-        assert wait_until(lambda: applied(), WAIT), (id_node.output[-2000:], sim.output[-2000:])
+        # sent again every 0.5 s until it acts: cog_id_node's publisher may not have
+        # matched the simulator's subscription yet (the command would be lost), and a
+        # loaded machine may make cog_id_node reject a setpoint as stale
+        end = time.monotonic() + WAIT
+        while not applied() and time.monotonic() < end:
+            msg = JointState(name=['joint3'], position=[theta], velocity=[0.0])
+            msg.header.stamp = probe.node.get_clock().now().to_msg()
+            setpoints.publish(msg)
+            wait_until(lambda: applied(), 0.5)
+        assert applied(), (id_node.output[-2000:], sim.output[-2000:])
         assert applied()[0].effort[2] == pytest.approx(expected, rel=1e-6)
         assert [m.effort[i] for m in applied() for i in (0, 1, 3)] == \
             [0.0] * (3 * len(applied()))
         got = values(probe.status_after(sent, lambda s: values(s)['efforts_accepted'] != '0'))
-        assert got['efforts_accepted'] == '1' and got['efforts_rejected'] == '0'
+        assert int(got['efforts_accepted']) >= 1 and got['efforts_rejected'] == '0'
         assert got['joint_states_publishers'] == '1'
     finally:
         probe.close()
