@@ -26,6 +26,7 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import spatial as sp
+from .continuation import joint_step_limits
 from .errors import (
     ClosureError,
     CogIdError,
@@ -43,6 +44,12 @@ from .native_simulation import step_config
 
 #: InverseDynamics.continuation_step: the solver follows the branch in steps of this
 CONTINUATION_STEP = 0.1
+#: rad (a length as its joint's kind shares it, continuation.joint_step_limits): the most
+#: any joint may move in one time step. A step that moves one further is refused: RK4 does
+#: not follow such a motion (near a singular pose the accelerations in actuator coordinates
+#: have no bound), and a revolute joint that turns more than pi in a step is ambiguous to
+#: the closure's 2 pi continuity
+MAX_STEP_MOTION = 0.5
 
 
 class Simulation:
@@ -70,6 +77,7 @@ class Simulation:
         kernels = kernels_for(solved, backend)
         self._backend = kernels.name
         self._forward = ForwardSolver(solved, kernels, CONTINUATION_STEP, mechanism.joints_at)
+        self._step_limits = joint_step_limits(solved, MAX_STEP_MOTION)
         self._pairs = solved.primary_pairs          # (active index, joint index) per primary
         serial = self._forward.serial
         #: the step in C (compiled kernels only) and its constants
@@ -166,11 +174,32 @@ class Simulation:
             raise SetpointError(f'step takes one sample of efforts (one number per active '
                                 f'joint), got shape {np.shape(checked)}')
         efforts = list(checked)
+        before = (self._state, self._zd, self._steps, self._z, self._rates, self._residual,
+                  self._last)
         try:
             if not self._native_step(efforts):
                 self._rk4(efforts)
+            self._check_motion(before[0][0])
         except CogIdError as exc:
+            (self._state, self._zd, self._steps, self._z, self._rates, self._residual,
+             self._last) = before
             raise self._stopped(exc) from None
+
+    def _check_motion(self, q: Sequence[float]) -> None:
+        """ClosureError ('unreachable') where the step just taken from the coordinates ``q``
+        moved a joint further than MAX_STEP_MOTION, or to a number that is not finite."""
+        m = self._solved
+        for j, (a, b, limit) in enumerate(zip(q, self._state[0], self._step_limits)):
+            moved = abs(float(b) - float(a))
+            if not moved <= limit:
+                name = m.model.coordinate_joints[j]
+                raise ClosureError(
+                    f'{name} would move by {moved:.3g} in one step of {self.time_step:g} s, '
+                    f'more than the {limit:.3g} a step can follow: the motion is too fast for '
+                    f'the time step: near a singular pose (the accelerations have no bound '
+                    f'there, and a shorter time_step only stops it later) or under efforts '
+                    f'too large (a shorter time_step follows those); the state stays at the '
+                    f'last step', moved, reason='unreachable')
 
     def _native_step(self, tau: List[float]) -> bool:
         """The step in C (native_simulation.py); False where it leaves it to :meth:`_rk4`
@@ -268,7 +297,7 @@ class Simulation:
         fastest = m.joints[max(rows)[1]] if rows else None
         joint = f'; the passive joint moving fastest there: {fastest}' if fastest else ''
         why = str(exc)
-        if getattr(exc, 'reason', None) == 'unreachable':
+        if getattr(exc, 'reason', None) == 'unreachable' and ' would move by ' not in why:
             why = ('the pose of the next step cannot be reached on the assembly branch: a '
                    'singular pose or dead centre on the way, or a motion too fast for the time '
                    'step (a shorter time_step follows it closer)')

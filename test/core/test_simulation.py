@@ -168,6 +168,44 @@ def test_a_singular_pose_stops_it_naming_the_time_and_the_joint():
     assert sim.time == STEP and np.abs(sim.positions - start).max() < 1e-3
 
 
+@pytest.mark.parametrize('time_step', [STEP, STEP / 2])
+def test_no_step_that_jumps_is_accepted(time_step):
+    """Adversarial check of issue 21: near the five-bar's singular pose the step before the
+    stop was accepted with a crank turned 14 rad in 1 ms (-4.4e11 rad at 0.5 ms) and
+    velocities of 2e6 rad/s, and cog_sim_node published it. Every accepted step now moves
+    each joint by at most MAX_STEP_MOTION; the one that would not is refused, naming the
+    joint, and the state stays at the last step."""
+    from cog_id_ros.core.simulation import MAX_STEP_MOTION
+    mech = _mechanism('five_bar.yaml')
+    sim = cog_id_ros.Simulation(mech, time_step)
+    last = sim.joint_positions()
+    with pytest.raises(cog_id_ros.ClosureError) as info:
+        for _ in range(int(2.0 / time_step)):
+            sim.step([0.0, 0.0])
+            now = sim.joint_positions()
+            assert np.abs(now - last).max() <= MAX_STEP_MOTION, (sim.time, now, last)
+            assert np.isfinite(sim.velocities).all()
+            last = now
+    assert ' would move by ' in str(info.value) and info.value.reason == 'unreachable'
+    assert np.array_equal(sim.joint_positions(), last)
+
+
+def test_a_passive_joint_follows_its_actuator_or_the_step_is_refused():
+    """Adversarial check of issue 21: the paper four-bar (a parallelogram: joint1 equals
+    joint3) driven by 2000 N m turned its crank more than pi a step and the passive joints
+    came out 2 pi apart from it (691 rad through cog_sim_node). joint1 follows joint3 to
+    the end, where a step that would turn a joint more than MAX_STEP_MOTION is refused."""
+    mech = _mechanism('paper_four_bar_a.yaml')
+    sim = cog_id_ros.Simulation(mech, STEP)
+    with pytest.raises(cog_id_ros.ClosureError) as info:
+        for _ in range(2000):
+            sim.step([2e3])
+            q = sim.joint_positions()
+            assert abs(q[0] - q[2]) < 1e-6, (sim.time, q)
+    assert 'in one step of 0.001 s' in str(info.value)
+    assert sim.velocities[0] > 400.0        # it went as fast as a step can follow
+
+
 def test_state_and_reset():
     name = 'five_bar_redundant.yaml'
     mech = _mechanism(name)
