@@ -61,6 +61,16 @@ class Simulation:
     :meth:`joint_velocities` (``mechanism.joints`` order).
     """
 
+    # the state (set by _set): the pose, the primary rates, the time in steps, the primary
+    # positions, the active rates, the closure residual, the last efforts and accelerations
+    _state: State
+    _zd: List[float]
+    _steps: int
+    _z: List[float]
+    _rates: List[float]
+    _residual: float
+    _last: Tuple[List[float], List[float]]
+
     def __init__(self, mechanism: Mechanism, time_step: float = 0.001,
                  backend: str = 'auto') -> None:
         if not isinstance(mechanism, Mechanism):
