@@ -88,8 +88,11 @@ def checked(mechanism: Mechanism, record: ForwardRecord, qd: Sequence[float],
 
 def singular_inertia(mechanism: Mechanism, condition: float, sample: Optional[int]
                      ) -> SingularConfigurationError:
-    """SingularConfigurationError for an inertia matrix that cannot be solved."""
+    """SingularConfigurationError for an inertia matrix that cannot be solved (its condition
+    infinite where the factorisation gave NaN: no mass at all)."""
     where = '' if sample is None else f'sample {sample}: '
+    if math.isnan(condition):
+        condition = math.inf
     return SingularConfigurationError(
         f'{where}singular inertia: the inertia of {mechanism.active_joints} in the '
         f'independent coordinates has condition {condition:.3g} (more than '
