@@ -56,6 +56,10 @@ class LoopFile:
                 raise self.error(key, None, f'unknown key (the file takes {", ".join(KEYS)})')
         pairs = self._list(data, 'closed_loop')
         types = self._list(data, 'type')
+        if pairs and all(isinstance(x, str) for x in pairs):
+            # one pair written without its list around it: say so, not that types are missing
+            raise self.error('closed_loop', None, f'must be a list of pairs of frame names, '
+                                                  f'got {show(pairs)}: write [{show(pairs)}]')
         self._same_length('closed_loop', pairs, 'type', types)
         self.pairs = []
         for k, (pair, kind) in enumerate(zip(pairs, types)):

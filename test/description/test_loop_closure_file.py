@@ -206,6 +206,9 @@ FIVE = "name_mot: ['motor/1', 'motor/2']\n"
      ['type: has 2 entries, closed_loop has 1']),
     ("closed_loop: [['1/tip']]\ntype: ['3d']\n" + FIVE,
      ['closed_loop entry 1', 'a pair of frame names']),
+    # one pair without its list (adversarial check: the message was about type)
+    ("closed_loop: ['1/tip', '2/tip']\ntype: ['3d']\n" + FIVE,
+     ['closed_loop: must be a list of pairs', "write [['1/tip', '2/tip']]"]),
     ("closed_loop: [['1/tip', '2/tip']]\ntype: ['3d']\nname_mot: ['motor/1', 'motor/3']\n",
      ['name_mot entry 2', "'motor/3' is neither a joint of the URDF"]),
     ("closed_loop: [['1/tip', '2/tip']]\ntype: ['3d']\n" + FIVE
