@@ -53,7 +53,6 @@ H = 0.001             # s: the simulator's step
 #: answers the state before it even on a loaded 2-core machine (at 0.25 a run under a
 #: load average of 3 had commands late enough to leave 1.3e-3 rad)
 REAL_TIME_FACTOR = 0.2
-NS = 1_000_000_000
 #: s of wall time the commands of the last states may take to arrive
 SETTLE = 5.0
 #: lines of the nodes' logs looked at for warnings when data were lost
