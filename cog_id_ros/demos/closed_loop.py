@@ -1,20 +1,26 @@
 """The closed-loop demo: cog_id_node in each control mode on the paper four-bar, closed
-through a simulated plant over real ROS 2 topics, and a picture of the tracking error.
+through cog_sim_node over real ROS 2 topics, and a picture of the tracking error.
 
     ./dev control            (python -m cog_id_ros.demos.closed_loop [--output PNG] [--seconds S])
 
 What it does: for each mode (``feedforward``, ``computed_torque`` with kp 400 and kd 40,
 ``pd_feedforward`` with the same rates at the start pose, ``gravity_compensation``) it
-starts one ``cog_id_node`` on config/paper_four_bar_a.yaml in a namespace of its own and
-closes it through :class:`.lockstep_plant.LockstepPlant` (a ``cog_id_ros.Simulation`` of
-the same mechanism, stepped in lockstep with the node's commands: each step's setpoint on
-``joint_setpoint``, the simulated state on ``measured_joint_states``, the node's
-``effort_command`` held over the step). The target is the paper's motion
-theta(t) = pi/2 + 0.5 sin(pi t), from a start 0.1 rad off; gravity compensation gets no
-setpoint and holds its start pose. It writes the tracking error of each mode over time to
-``--output`` (out/closed_loop.png), prints a table and exits 0 when computed torque is
-below 1e-3 rad from 0.5 s on and gravity compensation held its pose to 1e-4 rad; 1 when
-not; 2 when it did not run (no config file, a node that did not start).
+starts, in a namespace of its own, one ``cog_sim_node`` (the plant: the paper four-bar
+started 0.1 rad off the target, ``wait_for_effort:=true`` so it holds that pose until the
+first command, ``real_time_factor`` 0.2 so a loaded machine keeps up, ``joint_states``
+after every step) and one ``cog_id_node`` on config/paper_four_bar_a.yaml
+(``-r measured_joint_states:=joint_states``, ``joint_states_decimation:=0``; its
+``effort_command`` is the simulator's input without a remap). The target is the paper's
+motion theta(t) = pi/2 + 0.5 sin(pi t), played on simulated time: a player in this
+process hears every simulated state (stamped with simulated time t) and publishes the
+setpoint of t + one step, stamped ``start + t + step``, so the setpoint in force when the
+node answers the next state is that state's. Gravity compensation gets no setpoint and
+holds its start pose. It writes the tracking error of each mode over time to ``--output``
+(out/closed_loop.png), prints a table and exits 0 when computed torque is below 1e-3 rad
+from 0.5 s on and gravity compensation held its pose to 1e-4 rad; 1 when not, or when data
+were lost (a simulated step missing from ``joint_states``, a state or setpoint left
+without its command: each is said); 2 when it did not run (no config file, a node that did
+not start).
 
 It uses ROS_DOMAIN_ID from the environment (or one picked from the process id, printed),
 with discovery limited to this machine.
@@ -25,6 +31,8 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from typing import Any, Sequence
 
@@ -40,7 +48,15 @@ MODES = {
     'gravity_compensation': (),
 }
 START_ERROR = 0.1     # rad
-H = 0.001             # s: the plant's step
+H = 0.001             # s: the simulator's step
+#: simulated seconds per wall second: a step is 5 ms of wall time, in which the node
+#: answers the state before it even on a loaded 2-core machine (at 0.25 a run under a
+#: load average of 3 had commands late enough to leave 1.3e-3 rad)
+REAL_TIME_FACTOR = 0.2
+#: s of wall time the commands of the last states may take to arrive
+SETTLE = 5.0
+#: lines of the nodes' logs looked at for warnings when data were lost
+LOG_LINES = 20
 
 
 def target(t: float) -> tuple[list[float], list[float]]:
@@ -49,19 +65,47 @@ def target(t: float) -> tuple[list[float], list[float]]:
     return [float(theta)], [float(rate)]
 
 
-def start_node(config: str, mode: str, extra: Sequence[str]) -> tuple[Any, str]:
-    namespace = f'/closed_loop_{mode}'
-    proc = subprocess.Popen(
-        [sys.executable, '-m', 'cog_id_ros.node', '--ros-args', '--params-file', config,
-         '-r', f'__ns:={namespace}', '-p', f'control_mode:={mode}',
-         '-p', 'measurement_timeout:=2.0', '-p', 'setpoint_timeout:=2.0', *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    return proc, namespace
+def plant_params(config: str, directory: str) -> str:
+    """The parameter file with the parallelogram started START_ERROR off the target."""
+    import yaml
+    with open(config, encoding='utf-8') as stream:
+        doc = yaml.safe_load(stream)
+    theta = target(0.0)[0][0] + START_ERROR
+    doc['/**']['ros__parameters']['mechanism']['initial_positions'] = [
+        theta, -theta, theta, theta]
+    path = os.path.join(directory, 'plant.yaml')
+    with open(path, 'w', encoding='utf-8') as stream:
+        yaml.safe_dump(doc, stream)
+    return path
+
+
+def launch(command: Sequence[str]) -> Any:
+    return subprocess.Popen([sys.executable, '-m', *command], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+
+
+def start_sim(plant: str, namespace: str) -> Any:
+    """cog_sim_node, the plant, holding its start pose until the first command."""
+    return launch(['cog_id_ros.ros.sim_main', '--ros-args', '--params-file', plant,
+                  '-r', f'__ns:={namespace}', '-p', 'wait_for_effort:=true',
+                  '-p', f'real_time_factor:={REAL_TIME_FACTOR}', '-p', f'time_step:={H}',
+                  '-p', 'joint_states_period:=0.0', '-p', 'effort_timeout:=0.0'])
+
+
+def start_node(config: str, namespace: str, mode: str, extra: Sequence[str]) -> Any:
+    """cog_id_node in ``mode``, its measured states the simulator's joint_states."""
+    return launch(['cog_id_ros.node', '--ros-args', '--params-file', config,
+                  '-r', f'__ns:={namespace}', '-r', 'measured_joint_states:=joint_states',
+                  '-p', f'control_mode:={mode}', '-p', 'joint_states_decimation:=0',
+                  '-p', 'measurement_timeout:=2.0', '-p', 'setpoint_timeout:=2.0', *extra])
 
 
 def wait_started(proc: Any, timeout: float = 60.0) -> str:
-    """The node's output up to its start-up line ('' if it ended or did not start)."""
-    lines = []
+    """The node's output up to its start-up line ('' if it ended or did not start); from
+    then on a thread reads the rest into ``proc.log`` (a node blocked on a full pipe would
+    lose data)."""
+    lines: list[str] = []
+    proc.log = lines
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         line = proc.stdout.readline()
@@ -69,41 +113,63 @@ def wait_started(proc: Any, timeout: float = 60.0) -> str:
             return ''
         lines.append(line)
         if "mechanism '" in line:
+            threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True).start()
             return ''.join(lines)
     return ''
 
 
-def run_mode(context: Any, config: str, mode: str, seconds: float) -> dict[str, np.ndarray]:
+def stop(proc: Any) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(15)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def run_mode(context: Any, config: str, plant: str, mode: str, seconds: float
+             ) -> dict[str, Any]:
+    """One mode: the simulator, the player hearing it, then the node; the run's results."""
     import cog_id_ros
 
-    from .lockstep_plant import LockstepPlant
+    from .sim_player import SimPlayer
     mech = cog_id_ros.Mechanism.from_params_file(config)
     inertia = float(cog_id_ros.InverseDynamics(mech).equation_of_motion([math.pi / 2])[0][0, 0])
     extra = [a.format(kp=400 * inertia, kd=40 * inertia) for a in MODES[mode]]
-    proc, namespace = start_node(config, mode, extra)
+    namespace = f'/closed_loop_{mode}'
+    tracks = mode != 'gravity_compensation'
+    procs = [start_sim(plant, namespace)]
+    player = None
     try:
-        if not wait_started(proc):
+        if not wait_started(procs[0]):
+            raise RuntimeError(f'cog_sim_node ({mode}) did not start')
+        player = SimPlayer(context, namespace, mech, H, target if tracks else None,
+                           feedback=mode != 'feedforward')
+        if not player.heard():
+            raise RuntimeError(f'no joint_states from cog_sim_node ({mode})')
+        procs.append(start_node(config, namespace, mode, extra))
+        if not wait_started(procs[1]):
             raise RuntimeError(f'cog_id_node ({mode}) did not start')
-        sim = cog_id_ros.Simulation(mech, H)
-        sim.reset(positions=[target(0.0)[0][0] + START_ERROR])
-        plant = LockstepPlant(context, namespace, sim, name=f'plant_{mode}')
-        try:
-            if not plant.connected(feedback=mode != 'feedforward'):
-                raise RuntimeError(f'cog_id_node ({mode}) did not connect')
-            if mode == 'gravity_compensation':
-                out = plant.run(seconds)
-                out['setpoints'] = np.full_like(out['positions'], out['positions'][0])
-                return out
-            return plant.run(seconds, target, feedback=mode != 'feedforward')
-        finally:
-            plant.close()
+        if not player.connected():
+            raise RuntimeError(f'cog_id_node and cog_sim_node ({mode}) did not connect')
+        if not player.wait(seconds, timeout=seconds / REAL_TIME_FACTOR * 4 + 30):
+            raise RuntimeError(f'cog_sim_node ({mode}) did not reach {seconds:g} s of '
+                               'simulated time')
+        out = player.results(seconds, settle=SETTLE)
+        if out['lost']:
+            out['lost'] += [f'{name}: {line.rstrip()}' for name, proc in
+                            zip(('cog_sim_node', 'cog_id_node'), procs)
+                            for line in proc.log[-LOG_LINES:] if 'WARN' in line
+                            or 'ERROR' in line]
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        if player is not None:
+            player.close()
+        for proc in reversed(procs):
+            stop(proc)
+    if not tracks:
+        out['setpoints'] = np.full_like(out['positions'], out['positions'][0])
+    return out
 
 
 def plot(results: dict[str, dict[str, np.ndarray]], output: str) -> None:
@@ -121,7 +187,7 @@ def plot(results: dict[str, dict[str, np.ndarray]], output: str) -> None:
     ax.axhline(1e-3, color='grey', lw=0.8, ls='--')
     ax.set_xlabel('time (s)')
     ax.set_ylabel('|tracking error| (rad)')
-    ax.set_title('cog_id_node closed through a simulated paper four-bar, start 0.1 rad off')
+    ax.set_title('cog_id_node closed through cog_sim_node (paper four-bar), start 0.1 rad off')
     ax.legend(fontsize=8, loc='lower left')
     ax.grid(True, which='both', alpha=0.3)
     fig.tight_layout()
@@ -136,11 +202,16 @@ def summary(results: dict[str, dict[str, np.ndarray]]) -> bool:
     for mode, out in results.items():
         error = np.abs(out['setpoints'] - out['positions'])[:, 0]
         late = error[out['time'] >= 0.5]
-        print(f'{mode:<22} {error[0]:13.3g} {error[500]:10.3g} {late.max():16.3g}')
+        at_half = error[np.searchsorted(out['time'], 0.5)]
+        print(f'{mode:<22} {error[0]:13.3g} {at_half:10.3g} {late.max():16.3g}')
         if mode == 'computed_torque':
             ok &= bool(late.max() < 1e-3)
         if mode == 'gravity_compensation':
             ok &= bool(error.max() < 1e-4)
+    for mode, out in results.items():
+        for line in out['lost']:
+            print(f'{mode}: lost data: {line}')
+            ok = False
     return ok
 
 
@@ -164,7 +235,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        results = {mode: run_mode(context, config, mode, args.seconds) for mode in MODES}
+        with tempfile.TemporaryDirectory(prefix='closed_loop_') as directory:
+            plant = plant_params(config, directory)
+            results = {mode: run_mode(context, config, plant, mode, args.seconds)
+                       for mode in MODES}
     except RuntimeError as exc:
         print(f'closed_loop: {exc}', file=sys.stderr)
         return 2

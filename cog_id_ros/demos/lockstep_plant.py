@@ -1,4 +1,4 @@
-"""A plant in lockstep with cog_id_node over real topics: the closed-loop demo's and tests'.
+"""A plant in lockstep with cog_id_node over real topics: the closed-loop tests'.
 
 :class:`LockstepPlant` is an rclpy node around a :class:`cog_id_ros.Simulation` of the same
 mechanism. Each step of length h it publishes the setpoint of the motion at the step's time

@@ -5,7 +5,9 @@
 * :class:`Integrator`: one step with the held efforts (:class:`.sim_efforts.EffortHold`),
   then the outputs; the first error of the Simulation (a singular or unreachable pose)
   stops it, named, until a reset;
-* :class:`SimLoop`: the thread: steps when due, serves reset requests between steps.
+* :class:`SimLoop`: the thread: steps when due, serves reset requests between steps; with
+  ``wait_for_effort`` it holds the state (no step, the state published again) until the
+  first accepted effort after start or reset.
 
 The Simulation belongs to the thread alone: the executor (effort messages, ``~/reset``,
 diagnostics) reaches it only through the held efforts (under the node's lock, held for
@@ -31,6 +33,11 @@ from .sim_efforts import EffortHold
 MAX_LAG = 0.1
 #: s of wall time the thread sleeps at most at once (it wakes at once for a request)
 MAX_SLEEP = 0.1
+#: s of wall time between the publications of the held state while ``wait_for_effort``
+#: holds the simulation before its first effort (sim_parameters' text says the same)
+HELD_STATE_PERIOD = 0.1
+#: s of wall time the thread sleeps at once while it waits for the first effort
+EFFORT_POLL = 0.001
 #: s the ~/reset service waits for the integration thread to do the reset
 RESET_TIMEOUT = 5.0
 
@@ -109,9 +116,11 @@ class Integrator:
     """
 
     def __init__(self, simulation: Any, hold: EffortHold, lock: threading.Lock,
-                 outputs: StateOutputs, every: int, logger: Any) -> None:
+                 outputs: StateOutputs, every: int, logger: Any,
+                 wait_for_effort: bool = False) -> None:
         self.simulation, self.hold, self.lock = simulation, hold, lock
         self.outputs, self.every, self.logger = outputs, every, logger
+        self.wait_for_effort = wait_for_effort
         self.error: str | None = None
         self.error_reason = ''
         self.stops = 0              # times an error stopped the integration
@@ -125,6 +134,16 @@ class Integrator:
 
     def begin(self) -> None:
         """Publish the state as it is (time 0: start, reset), and the clock."""
+        self.outputs.publish_clock(self.stamp_ns)
+        self._publish([0.0] * self.hold.size)
+
+    def waiting(self) -> bool:
+        """Whether ``wait_for_effort`` holds the state: no effort accepted since the start
+        or the last reset."""
+        return self.wait_for_effort and self.hold.received_at is None
+
+    def republish(self) -> None:
+        """The held state again, as it is (at its own stamp), and the clock."""
         self.outputs.publish_clock(self.stamp_ns)
         self._publish([0.0] * self.hold.size)
 
@@ -196,6 +215,7 @@ class SimLoop:
         self._wake = threading.Event()
         self._requests: list[tuple[threading.Event, list[Any]]] = []
         self._requests_lock = threading.Lock()
+        self._held_published = time.monotonic()     # begin() published the state
 
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name='cog_sim_node integration',
@@ -249,6 +269,9 @@ class SimLoop:
             if integrator.error is not None:
                 self._sleep(MAX_SLEEP)
                 continue
+            if integrator.waiting():
+                self._hold_state()
+                continue
             wait = pacer.wait()
             if wait > 0.0:
                 self._sleep(min(wait, MAX_SLEEP))
@@ -263,6 +286,16 @@ class SimLoop:
             pacer.stepped()
             if wake.is_set():
                 wake.clear()
+
+    def _hold_state(self) -> None:
+        """wait_for_effort: no step before the first effort; the held state published
+        again every HELD_STATE_PERIOD s; the pacing starts when the effort comes."""
+        now = time.monotonic()
+        if now - self._held_published >= HELD_STATE_PERIOD:
+            self._held_published = now
+            self.integrator.republish()
+        self._sleep(EFFORT_POLL)
+        self.pacer.restart()
 
     def _sleep(self, seconds: float) -> None:
         if self._wake.wait(seconds):
@@ -280,3 +313,4 @@ class SimLoop:
             finally:
                 done.set()
         self.pacer.restart()
+        self._held_published = time.monotonic()     # reset() published the state

@@ -29,7 +29,8 @@ position, velocity and effort out on joint_states, stamped with the simulated ti
 
 The parameters: cog_id_node's parameter file (the mechanism), plus time_step (0.001 s),
 real_time_factor (1; 0: as fast as possible), publish_clock (false), joint_states_period
-(0.01 s), effort_timeout (0.5 s of simulated time) and effort_timeout_behavior (zero or
+(0.01 s), wait_for_effort (false: true holds the state until the first effort),
+effort_timeout (0.5 s of simulated time) and effort_timeout_behavior (zero or
 hold), max_effort (1e6), effort_limits, e.g.
 
     {PROGRAM} --ros-args --params-file config/paper_four_bar_a.yaml

@@ -95,7 +95,7 @@ class CogSimNode(ReadOnlyNode):
             outputs = self._create_topics()
         every = max(1, round(config.joint_states_period / config.time_step))
         self.integrator = Integrator(self.simulation, self.hold, self.lock, outputs, every,
-                                     self.get_logger())
+                                     self.get_logger(), config.wait_for_effort)
         self.pacer = Pacer(config.time_step, config.real_time_factor)
         self.loop = SimLoop(self.integrator, self.pacer, self.context, self.get_logger(),
                             self.internal_error)
@@ -135,8 +135,10 @@ class CogSimNode(ReadOnlyNode):
                 f"{', '.join(config.active_joints)}; simulating with time step "
                 f'{config.time_step:g} s ({self.simulation.backend} kernels), {pace}; '
                 f'joint_states every {every} step(s)'
-                f"{'; /clock published' if config.publish_clock else ''}; effort timeout "
-                f'{config.effort_timeout:g} s ({config.effort_timeout_behavior})')
+                f"{'; /clock published' if config.publish_clock else ''}"
+                f"{'; the state held until the first effort' if config.wait_for_effort else ''}"
+                f'; effort timeout {config.effort_timeout:g} s '
+                f'({config.effort_timeout_behavior})')
 
     # --- threads -----------------------------------------------------------------------------
 

@@ -55,6 +55,15 @@ SIM_PARAMETERS: dict[str, NodeParameter] = _table(
                     'whole number of steps (at least one); the state at time 0 (start, '
                     'reset) is published too; 0: after every step'),
     NodeParameter(
+        'wait_for_effort', 'bool', False, 'bool',
+        description='hold the state after start and after `~/reset` until the first '
+                    'accepted effort message, like a plant whose brakes release when the '
+                    'drive starts: simulated time does not advance, `/clock` stays at 0, '
+                    'and the held state (stamped 0) is published again every '
+                    f'{0.1:g} s of wall time so that a controller closing the loop on it '
+                    'can answer; false: the integration starts at once, with zero effort '
+                    'until the first message'),
+    NodeParameter(
         'effort_timeout', 'double', 0.5, 'number', unit='s', low=1e-6, high=3600.0,
         special=(0.0, 'never'),
         description='s of simulated time after the last accepted effort message at which '

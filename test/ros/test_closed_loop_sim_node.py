@@ -13,15 +13,17 @@ holds it there. The commands act a step late or so (the simulator holds the newe
 it has at each step, and none for the first steps after a reset), which the loop corrects;
 0.2 of real time leaves the controller five times a step's time to answer.
 
-Gravity compensation is checked holding a pose in lockstep (test_closed_loop.py), not
-here: it has no stiffness, so the velocity the first steps after ``~/reset`` pick up with
-no effort held (until the first command arrives) stays, and the pose drifts with it.
+Gravity compensation holds the tilted paper four-bar (where zero effort falls) to 1e-4 rad
+over 2 s of simulated time, the simulator given ``wait_for_effort:=true``: it has no
+stiffness, so without that hold the velocity the first steps after ``~/reset`` pick up with
+no effort held (until the first command arrives) would stay, and the pose drift with it.
 """
 import threading
 import time
 
 import numpy as np
 import pytest
+import yaml
 
 rclpy = pytest.importorskip('rclpy')
 
@@ -44,13 +46,14 @@ BOUND = {'revolute': 1e-3, 'prismatic': 1e-4}
 class Pair:
     """cog_sim_node and cog_id_node in one namespace, and a recorder of joint_states."""
 
-    def __init__(self, ros_process, context, key, namespace, *controller):
-        self.params = CONFIGS[key]
+    def __init__(self, ros_process, context, key, namespace, *controller, params=None,
+                 sim_extra=()):
+        self.params = params or CONFIGS[key]
         self.mech = cog_id_ros.Mechanism.from_params_file(self.params)
         self.sim = ros_process(['cog_sim_node', '--ros-args', '--params-file', self.params,
                                 '-r', f'__ns:={namespace}', '-p', 'real_time_factor:=0.2',
                                 '-p', 'joint_states_period:=0.0',
-                                '-p', 'effort_timeout:=0.0'])
+                                '-p', 'effort_timeout:=0.0', *sim_extra])
         self.node = ros_process(['cog_id_node', '--ros-args', '--params-file', self.params,
                                  '-r', f'__ns:={namespace}',
                                  '-r', 'measured_joint_states:=joint_states',
@@ -132,5 +135,38 @@ def test_computed_torque_through_the_simulator_brings_the_error_down(ros_process
         error = np.abs(q - goal)
         assert np.allclose(error[0], pair.scale(START))
         assert (error[t >= 0.5] < pair.scale(BOUND)).all(), error[t >= 0.5].max(axis=0)
+    finally:
+        pair.close()
+
+
+TILT = 1.2      # rad: the paper four-bar (a)'s parallelogram away from its upright pose
+
+
+def tilted_four_bar(tmp_path):
+    with open(CONFIGS['four_bar'], encoding='utf-8') as stream:
+        doc = yaml.safe_load(stream)
+    doc['/**']['ros__parameters']['mechanism']['initial_positions'] = [TILT, -TILT, TILT,
+                                                                     TILT]
+    path = tmp_path / 'tilted.yaml'
+    path.write_text(yaml.safe_dump(doc))
+    return str(path)
+
+
+def test_gravity_compensation_through_the_simulator_holds_a_pose_where_zero_effort_falls(
+        ros_process, rclpy_context, tmp_path):
+    params = tilted_four_bar(tmp_path)
+    falling = cog_id_ros.Simulation(cog_id_ros.Mechanism.from_params_file(params))
+    for _ in range(200):
+        falling.step([0.0])
+    assert abs(falling.positions[0] - TILT) > 1e-2      # zero effort: it falls at once
+    pair = Pair(ros_process, rclpy_context, 'four_bar', '/sn_gc', '-p',
+                'control_mode:=gravity_compensation', params=params,
+                sim_extra=('-p', 'wait_for_effort:=true'))
+    try:
+        t, q = pair.reset_and_record(2.0)
+        assert t[-1] >= 1.99 and len(t) >= 1900, (t[-1], len(t))
+        assert np.allclose(q[0], TILT, rtol=0, atol=1e-12)
+        drift = np.abs(q - TILT).max()
+        assert drift < 1e-4, drift
     finally:
         pair.close()

@@ -378,6 +378,50 @@ def test_as_fast_as_possible_runs_faster_than_real_time(ros_process, rclpy_conte
         assert proc.stop() == 0, proc.output
 
 
+def test_wait_for_effort_holds_the_state_until_the_first_effort(ros_process, rclpy_context,
+                                                                 tmp_path_factory):
+    """wait_for_effort: the tilted four-bar (which falls at once without it) stays at time
+    0 and its initial pose, joint_states and /clock repeated at 0, until an effort comes;
+    then it integrates from there, sample for sample as Simulation; after ~/reset it holds
+    again."""
+    params = tilted_params(tmp_path_factory, 'held.yaml')
+    proc = start_sim(ros_process, params, '/held', '-p', 'wait_for_effort:=true',
+                     '-p', 'publish_clock:=true', '-p', 'joint_states_period:=0.005')
+    probe = SimProbe(rclpy_context, '/held', clock=True)
+    initial = [TILT, -TILT, TILT, TILT]
+
+    def held_since(start):
+        states = [m for t, m in list(probe.states) if t >= start]
+        clocks = [c for t, c in list(probe.clocks) if t >= start]
+        assert len(states) >= 5 and len(clocks) >= 5, (len(states), len(clocks))
+        assert all(ns(m.header.stamp) == 0 for m in states), [ns(m.header.stamp)
+                                                             for m in states][-3:]
+        assert clocks == [0] * len(clocks), clocks[-3:]
+        for msg in states:
+            np.testing.assert_allclose(msg.position, initial, rtol=0, atol=1e-9)
+            assert list(msg.velocity) == [0.0] * 4
+    try:
+        assert probe.connected(), proc.output
+        start = time.monotonic()
+        time.sleep(1.0)                 # the held state is published again every 0.1 s
+        held_since(start)
+        probe.send(0.0)                 # the first effort: the brakes release
+        assert wait_until(lambda: max(probe.by_stamp()) >= NS // 2, WAIT), proc.output
+        status = values(probe.status_after(0.0))
+        simulation = reference(params, status['backend'])
+        simulation.reset()
+        np.testing.assert_allclose(simulation.joint_positions(), initial, atol=1e-9)
+        assert_matches_simulation(probe.by_stamp(), simulation, NS // 2)
+        assert probe.reset().success
+        start = time.monotonic() + 0.05     # what was in flight before the reset
+        time.sleep(1.0)
+        held_since(start)
+        assert_finite(probe)
+    finally:
+        probe.close()
+        assert proc.stop() == 0, proc.output
+
+
 # --- cog_id_node's efforts, no remap -------------------------------------------------------
 
 def test_cog_id_node_efforts_reach_it_without_remap(ros_process, rclpy_context):
