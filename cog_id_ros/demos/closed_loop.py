@@ -11,16 +11,19 @@ first command, ``real_time_factor`` 0.2 so a loaded machine keeps up, ``joint_st
 after every step) and one ``cog_id_node`` on config/paper_four_bar_a.yaml
 (``-r measured_joint_states:=joint_states``, ``joint_states_decimation:=0``; its
 ``effort_command`` is the simulator's input without a remap). The target is the paper's
-motion theta(t) = pi/2 + 0.5 sin(pi t), played on simulated time: a player in this
-process hears every simulated state (stamped with simulated time t) and publishes the
-setpoint of t + one step, stamped ``start + t + step``, so the setpoint in force when the
-node answers the next state is that state's. Gravity compensation gets no setpoint and
-holds its start pose. It writes the tracking error of each mode over time to ``--output``
-(out/closed_loop.png), prints a table and exits 0 when computed torque is below 1e-3 rad
-from 0.5 s on and gravity compensation held its pose to 1e-4 rad; 1 when not, or when data
-were lost (a simulated step missing from ``joint_states``, a state or setpoint left
-without its command: each is said); 2 when it did not run (no config file, a node that did
-not start).
+motion theta(t) = pi/2 + 0.5 sin(pi t), played on simulated time by a player in this
+process (demos/sim_player.py): once every path carried data (probes of the plant's pose
+at rest until the node counts one, its joint_effort heard, the simulator stepping) the
+run starts at the next simulated state t0, and for each simulated state at t the player
+publishes the setpoint of t - t0 + one step, so the setpoint in force when the node
+answers the next state is that state's. Gravity compensation gets no setpoint and holds
+its start pose. It writes the tracking error of each mode over time to ``--output``
+(out/closed_loop.png) and each node's log beside it (closed_loop_logs/), prints a table
+and exits 0 when computed torque is below 1e-3 rad from 0.5 s on and gravity
+compensation held its pose to 1e-4 rad; 1 when not, or when data were lost (a simulated
+step missing from ``joint_states``, a state or setpoint left without its command, a
+setpoint the node's /diagnostics do not count as accepted: each is said); 2 when it did
+not run (no config file, a node that did not start, paths that did not connect).
 
 It uses ROS_DOMAIN_ID from the environment (or one picked from the process id, printed),
 with discovery limited to this machine.
@@ -97,7 +100,8 @@ def start_node(config: str, namespace: str, mode: str, extra: Sequence[str]) -> 
     return launch(['cog_id_ros.node', '--ros-args', '--params-file', config,
                   '-r', f'__ns:={namespace}', '-r', 'measured_joint_states:=joint_states',
                   '-p', f'control_mode:={mode}', '-p', 'joint_states_decimation:=0',
-                  '-p', 'measurement_timeout:=2.0', '-p', 'setpoint_timeout:=2.0', *extra])
+                  '-p', 'measurement_timeout:=2.0', '-p', 'setpoint_timeout:=2.0',
+                  '-p', 'diagnostics_period:=0.1', *extra])
 
 
 def wait_started(proc: Any, timeout: float = 60.0) -> str:
@@ -128,8 +132,16 @@ def stop(proc: Any) -> None:
         proc.wait()
 
 
-def run_mode(context: Any, config: str, plant: str, mode: str, seconds: float
-             ) -> dict[str, Any]:
+def save_logs(procs: Sequence[Any], mode: str, log_dir: str) -> None:
+    """Each node's output, whole, in ``log_dir``/<mode>_<node>.log."""
+    os.makedirs(log_dir, exist_ok=True)
+    for name, proc in zip(('cog_sim_node', 'cog_id_node'), procs):
+        with open(os.path.join(log_dir, f'{mode}_{name}.log'), 'w', encoding='utf-8') as out:
+            out.writelines(getattr(proc, 'log', []))
+
+
+def run_mode(context: Any, config: str, plant: str, mode: str, seconds: float,
+             log_dir: str) -> dict[str, Any]:
     """One mode: the simulator, the player hearing it, then the node; the run's results."""
     import cog_id_ros
 
@@ -151,8 +163,10 @@ def run_mode(context: Any, config: str, plant: str, mode: str, seconds: float
         procs.append(start_node(config, namespace, mode, extra))
         if not wait_started(procs[1]):
             raise RuntimeError(f'cog_id_node ({mode}) did not start')
-        if not player.connected():
-            raise RuntimeError(f'cog_id_node and cog_sim_node ({mode}) did not connect')
+        missing = player.connect()
+        if missing:
+            raise RuntimeError(f'cog_id_node and cog_sim_node ({mode}) did not connect: '
+                               f'{missing}')
         if not player.wait(seconds, timeout=seconds / REAL_TIME_FACTOR * 4 + 30):
             raise RuntimeError(f'cog_sim_node ({mode}) did not reach {seconds:g} s of '
                                'simulated time')
@@ -167,6 +181,7 @@ def run_mode(context: Any, config: str, plant: str, mode: str, seconds: float
             player.close()
         for proc in reversed(procs):
             stop(proc)
+        save_logs(procs, mode, log_dir)
     if not tracks:
         out['setpoints'] = np.full_like(out['positions'], out['positions'][0])
     return out
@@ -237,7 +252,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with tempfile.TemporaryDirectory(prefix='closed_loop_') as directory:
             plant = plant_params(config, directory)
-            results = {mode: run_mode(context, config, plant, mode, args.seconds)
+            log_dir = os.path.join(os.path.dirname(os.path.abspath(args.output)),
+                                   'closed_loop_logs')
+            results = {mode: run_mode(context, config, plant, mode, args.seconds, log_dir)
                        for mode in MODES}
     except RuntimeError as exc:
         print(f'closed_loop: {exc}', file=sys.stderr)
