@@ -31,7 +31,6 @@ class ComputedTorque(FeedbackMode):
         mech = measured_solver.mechanism
         self.redundant = mech.is_redundant
         self.primary = list(mech.primary)
-        self.active_rows = [mech.joints.index(j) for j in mech.active_joints]
 
     def law(self, q_m: list[float], qd_m: list[float], setpoint: Setpoint | None,
             error: list[float], rate_error: list[float]) -> list[float]:
@@ -45,15 +44,8 @@ class ComputedTorque(FeedbackMode):
     def _on_independent(self, q_m: list[float], qd_m: list[float],
                         qdd_d: list[float], commanded: list[float]) -> list[float]:
         """qdd_d + V_a w, w the feedback accelerations of the primary actuators."""
-        solver = self.measured_solver
-        solver.sample_torques(q_m, qd_m, qdd_d)       # the pose closed at q_m (or the error)
-        columns = []
-        for p in self.primary:          # S u_p: the joint rates of a unit rate of p
-            unit = [0.0] * len(q_m)
-            unit[p] = 1.0
-            rates = solver.last_pose(unit)[1]
-            columns.append([rates[i] for i in self.active_rows])
-        y = np.array(columns).T                        # (M, dof) = V_a G
+        self.measured_solver.sample_torques(q_m, qd_m, qdd_d)   # the pose closed at q_m
+        y = self.active_rate_map(self.primary)         # (M, dof) = V_a G: S u_p
         v_a = y @ np.linalg.inv(y[self.primary])      # G: the primary rows of y
         w = np.array([c - a for c, a in zip(commanded, qdd_d)])[self.primary]
         return (np.array(qdd_d) + v_a @ w).tolist()

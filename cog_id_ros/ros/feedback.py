@@ -83,6 +83,22 @@ class FeedbackMode:
         """The mode's efforts (``error``: q_d - q_m, ``rate_error``: qd_d - qd_m)."""
         raise NotImplementedError
 
+    def active_rate_map(self, columns: Sequence[int] | None = None) -> np.ndarray:
+        """S_a (M x M): the active rows of the joint-rate map S (qdot = S thetadot, eq. (7)'s
+        distribution is tau = S^T Q) at the measured pose solved last; column a is the
+        rates of the active joints when active joint a moves at unit rate, as the closure
+        moves it (the identity without redundant actuation). ``columns``: only those."""
+        solver = self.measured_solver
+        joints = solver.mechanism.joints
+        rows = [joints.index(j) for j in self.config.active_joints]
+        out = []
+        for a in range(len(rows)) if columns is None else columns:
+            unit = [0.0] * len(rows)
+            unit[a] = 1.0
+            rates = solver.last_pose(unit)[1]
+            out.append([rates[i] for i in rows])
+        return np.array(out).T
+
     def hold(self, pose: Sequence[float]) -> np.ndarray:
         """The gravity-holding efforts of ``pose`` (the last measured one), B(q, 0)."""
         return self.measured_solver.torques(list(pose), self.zeros, self.zeros)

@@ -6,10 +6,15 @@ setpoint solver); the measured pose is solved too (its loops must close: a measu
 that cannot is rejected). Gains in N m/rad and N m s/rad (N/m, N s/m for prismatic joints).
 Linearised at a pose, each joint's error obeys ``H_jj e'' + pd_kd e' + pd_kp e ≈ 0``:
 underdamped below ``pd_kd = 2 √(pd_kp H_jj)`` (checked at ``initial_positions`` at
-start-up). Docs: docs/control.md.
+start-up). Redundant actuation: the PD efforts ``p`` act through the generalized force
+they make on the independent coordinates, distributed as eq. (7) distributes every force,
+``S_a^T p`` (the weighted minimum-norm efforts of that force: actuators are not set
+against each other by the feedback). Docs: docs/control.md.
 """
 import math
 from typing import Any
+
+import numpy as np
 
 from .config import NodeConfig
 from .feedback import FeedbackMode, Setpoint, underdamped
@@ -22,14 +27,17 @@ class PdFeedForward(FeedbackMode):
         super().__init__(solver, measured_solver, config)
         self.kp = [float(k) for k in config.pd_kp]
         self.kd = [float(k) for k in config.pd_kd]
+        self.redundant = measured_solver.mechanism.is_redundant
 
     def law(self, q_m: list[float], qd_m: list[float], setpoint: Setpoint | None,
             error: list[float], rate_error: list[float]) -> list[float]:
         assert setpoint is not None     # PD plus feed-forward tracks a setpoint
         # the measured pose closed (branch continuity), or the core's error: no command
         self.measured_solver.sample_torques(q_m, qd_m, self.zeros)
-        return [ff + kp * e + kd * de for ff, kp, e, kd, de in
-                zip(setpoint[3], self.kp, error, self.kd, rate_error)]
+        pd = [kp * e + kd * de for kp, e, kd, de in zip(self.kp, error, self.kd, rate_error)]
+        if self.redundant:      # on the independent coordinates, distributed as eq. (7)
+            pd = (self.active_rate_map().T @ np.array(pd)).tolist()
+        return [ff + p for ff, p in zip(setpoint[3], pd)]
 
     def gain_warnings(self) -> list[str]:
         joints = self.config.active_joints

@@ -117,6 +117,41 @@ def test_redundant_efforts_are_distributed_as_eq_7():
     assert np.allclose(tau, InverseDynamics(red).torques(q_m, v_m, qdd), rtol=1e-9, atol=1e-9)
 
 
+def test_redundant_pd_efforts_act_on_the_independent_coordinates_as_eq_7():
+    """Five-bar with three actuators: the PD efforts are eq. (7)'s distribution of the
+    force the per-joint PD makes on the independent coordinates: the same motion as the
+    per-joint efforts, and within the span of every torque eq. (7) gives (no actuator set
+    against another)."""
+    red = Mechanism.from_params_file('config/five_bar_redundant.yaml')
+    kp, kd = [50.0, 70.0, 90.0], [3.0, 4.0, 5.0]
+    mode, _ = mode_for(red, 'pd_feedforward', pd_kp=kp, pd_kd=kd)
+    q_d, v_d, a_d, q_m, _ = states(red, 4)
+    v_d = v_m = np.zeros(len(q_d))
+    mode.efforts(q_d.tolist(), v_d.tolist(), np.zeros(len(q_d)).tolist())
+    ff = np.array(mode.setpoint[3])
+    pd = np.array(mode.command(q_m.tolist(), v_m.tolist())) - ff
+    per_joint = np.array(kp) * (q_d - q_m)
+    assert np.abs(pd - per_joint).max() > 1e-3 * np.abs(per_joint).max()   # not as given
+    solver = InverseDynamics(red)
+    primary = red.primary
+    same = solver.forward_dynamics(q_m, v_m, ff + pd)[primary]
+    assert np.allclose(same, solver.forward_dynamics(q_m, v_m, ff + per_joint)[primary],
+                       rtol=1e-9, atol=1e-9)
+    # eq. (7)'s torques at q_m span W^-1 V_a: two motions and rest give two directions
+    rest = solver.torques(q_m, v_m, np.zeros(3))
+    span = np.array([solver.torques(q_m, v_m, qdd) - rest
+                     for qdd in (solver.forward_dynamics(q_m, v_m, rest + e)
+                                 for e in np.eye(3)[:2])]).T
+    coef, *_ = np.linalg.lstsq(span, pd, rcond=None)
+    assert np.allclose(span @ coef, pd, rtol=1e-9, atol=1e-9 * np.abs(pd).max())
+    # and the ordinary five-bar (no redundancy) keeps the per-joint PD as given
+    plain = Mechanism.from_params_file('config/five_bar.yaml')
+    mode, _ = mode_for(plain, 'pd_feedforward', pd_kp=kp[:2], pd_kd=kd[:2])
+    mode.efforts(q_d[:2].tolist(), [0.0, 0.0], [0.0, 0.0])
+    tau = np.array(mode.command(q_m[:2].tolist(), [0.0, 0.0]))
+    assert np.allclose(tau - mode.setpoint[3], per_joint[:2], rtol=1e-12, atol=1e-12)
+
+
 def test_a_measured_pose_whose_loops_cannot_close_raises_and_no_command():
     mech = Mechanism.from_params_file('config/stewart_6ups_spherical.yaml')
     for name in FEEDBACK_MODES:
