@@ -10,13 +10,18 @@ command received (zero-order hold, as a motor driver holds one), whose state is 
 on ``measured_joint_states`` every period after the setpoint of the paper-like motion
 (every active joint at its initial position plus 0.3 rad or 3 cm times sin(pi t)).
 Every 10 s it reads the node's resident memory (VmRSS of /proc/<pid>/status) and its
-/diagnostics counters; at the end it prints the states sent, the commands received (lost =
-sent - received after a drain), the node's own counts (accepted, rejected by reason,
-timeouts), the largest gap between two commands, the RSS at each minute and its growth
-over the second half, and the worst tracking error. Exit status 0 when nothing was lost or
-rejected and the RSS grew by less than 5 MB over the second half; 1 otherwise.
+/diagnostics counters. At the end it accounts for every message: each measured state sent
+is accepted or rejected by the node (else lost on the way to it), each accepted one and
+each timeout is answered by a command the plant received (else lost on the way back). It
+prints that, the largest gap between two commands, how far this process (the plant) ever
+fell behind its own clock, the RSS at each minute and its growth over the second half,
+and the worst tracking error. Exit status 0 when nothing was lost or rejected, the RSS grew
+by less than 5 MB over the second half, and no measurement_timeout went off during the run
+that the plant's own lateness does not explain (one goes off after the last state: the
+stream stopped, and the drain waits for it); 1 otherwise (the line says which).
 """
 import argparse
+import gc
 import json
 import math
 import os
@@ -30,6 +35,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 NS = 1_000_000_000
+#: s: the node's measurement_timeout in the soak
+MEASUREMENT_TIMEOUT = 0.5
 
 
 def rss_mb(pid):
@@ -64,7 +71,10 @@ class Plant:
         self.latest = [0.0] * len(mechanism.active_joints)
         self.received = 0
         self.last_arrival = None
-        self.worst_gap = 0.0
+        self.worst_gap, self.worst_gap_at = 0.0, 0.0        # s, and when (since started)
+        self.started = time.monotonic()         # reset when the run starts
+        self.running = True                     # False once the last state was sent
+        self.worst_late, self.worst_late_at = 0.0, 0.0     # s the plant was behind, when
         self.diagnostics = {}
         self.node.create_subscription(Float64MultiArray, '/soak/effort_command',
                                       self._on_command, control_qos())
@@ -76,8 +86,9 @@ class Plant:
 
     def _on_command(self, msg):
         now = time.monotonic()
-        if self.last_arrival is not None:
-            self.worst_gap = max(self.worst_gap, now - self.last_arrival)
+        if self.running and self.last_arrival is not None and \
+                now - self.last_arrival > self.worst_gap:
+            self.worst_gap, self.worst_gap_at = now - self.last_arrival, now - self.started
         self.last_arrival = now
         self.latest = list(msg.data)
         self.received += 1
@@ -115,7 +126,8 @@ def main(argv=None):
     node = subprocess.Popen(
         [sys.executable, '-m', 'cog_id_ros.node', '--ros-args', '--params-file',
          args.params_file, '-r', '__ns:=/soak', '-p', f'control_mode:={args.mode}',
-         '-p', 'kp:=[100.0]', '-p', 'kd:=[20.0]', '-p', 'measurement_timeout:=0.5'],
+         '-p', 'kp:=[100.0]', '-p', 'kd:=[20.0]',
+         '-p', f'measurement_timeout:={MEASUREMENT_TIMEOUT}'],
         stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, cwd=REPO)
     plant = Plant(mech)
     active, every = list(mech.active_joints), list(mech.joints)
@@ -131,12 +143,17 @@ def main(argv=None):
         time.sleep(1.0)
         steps = int(round(args.minutes * 60 * args.rate))
         t0, stamp0 = time.perf_counter(), time.time_ns()
+        plant.started = time.monotonic()
         next_sample = 0.0
+        gc.collect()
+        gc.freeze()         # the plant's start-up objects: no full collection walks them
         for k in range(steps):
             due = t0 + k * period
             while (now := time.perf_counter()) < due:
                 if due - now > 0.0005:
                     time.sleep(due - now - 0.0004)
+            if now - due > plant.worst_late:     # this process itself behind its clock
+                plant.worst_late, plant.worst_late_at = now - due, k * period
             t = k * period
             stamp = stamp0 + int(t * NS)
             q_d = q0 + amplitude * math.sin(math.pi * t)
@@ -154,7 +171,10 @@ def main(argv=None):
             if t >= next_sample:
                 samples.append((t, rss_mb(node.pid), dict(plant.diagnostics)))
                 next_sample += 10.0
-        time.sleep(1.0)
+        plant.running = False       # gaps from here on are the end of the stream
+        # the drain: the commands of the last states, then the node's timeout of the stopped
+        # stream (measurement_timeout after the last state) and a report after it
+        time.sleep(MEASUREMENT_TIMEOUT + 2.0)
         samples.append((args.minutes * 60, rss_mb(node.pid), dict(plant.diagnostics)))
     finally:
         node.send_signal(2)
@@ -165,32 +185,61 @@ def main(argv=None):
     return report(args, sent, plant, samples, resets, worst_error)
 
 
+def count(values, key):
+    try:
+        return int(values.get(key, 0) or 0)
+    except ValueError:
+        return 0
+
+
 def report(args, sent, plant, samples, resets, worst_error):
-    lost = sent - plant.received
+    """Print the account; the exit status. Every measured state is accounted for by the
+    node's counters (accepted or rejected: else lost on the way to it) and every command
+    by the plant (the node's accepted states plus one per timeout: else lost on the way
+    back)."""
     last = samples[-1][2]
-    rejected = int(last.get('measurements_rejected', 0) or 0)
+    accepted = count(last, 'measurements_accepted')
+    rejected = count(last, 'measurements_rejected')
+    timeouts = count(last, 'timeouts')
+    to_node = sent - accepted - rejected
+    to_plant = accepted + timeouts - plant.received
     rss = [(t, r) for t, r, _ in samples]
     half = [r for t, r in rss if t >= args.minutes * 30]
     growth = (half[-1] - half[0]) if len(half) > 1 else math.nan
     print(f'{os.path.basename(args.params_file)}, {args.mode}, {args.rate:g} Hz, '
           f'{args.minutes:g} min')
-    print(f'measured states sent {sent}, commands received {plant.received}, lost {lost}; '
-          f"node: accepted {last.get('measurements_accepted')}, rejected {rejected}, "
-          f"timeouts {last.get('timeouts')}, setpoints lost {last.get('setpoints_lost')}")
-    print(f'worst gap between commands {plant.worst_gap * 1e3:.1f} ms; worst tracking error '
-          f'{worst_error:.3g}; plant resets {resets}; node compute median '
-          f"{last.get('compute_time_median_us')} us")
+    print(f'measured states sent {sent}: node accepted {accepted}, rejected {rejected}, '
+          f'lost on the way to it {to_node}; commands received {plant.received} '
+          f'(timeout commands {timeouts}: the end of the stream is one), lost on the way back {to_plant}; setpoints lost '
+          f"{last.get('setpoints_lost')}")
+    print(f'worst gap between commands {plant.worst_gap * 1e3:.1f} ms (ending at t = '
+          f'{plant.worst_gap_at:.3f} s); the plant (this '
+          f'process) at worst {plant.worst_late * 1e3:.1f} ms behind its clock (t = '
+          f'{plant.worst_late_at:.1f} s); worst tracking error {worst_error:.3g}; plant '
+          f"resets {resets}; node compute median {last.get('compute_time_median_us')} us")
+    # one timeout is the end of the stream (the drain waits for it); others, in the run
+    in_run = max(0, timeouts - 1)
+    if in_run:
+        cause = ('the plant itself was late by more than measurement_timeout'
+                 if plant.worst_late >= MEASUREMENT_TIMEOUT else
+                 'the plant was never that late: the node or DDS held the states')
+        print(f'measurement_timeout ({MEASUREMENT_TIMEOUT:g} s) went off {in_run} time(s) '
+              f'during the run (besides the end of the stream): {cause}')
     print('RSS (MB) every minute: ' + ', '.join(f'{r:.1f}' for t, r in rss
                                                   if abs(t / 60 - round(t / 60)) < 1e-6 or
                                                   t == rss[-1][0]))
     print(f'RSS growth over the second half: {growth:+.2f} MB')
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as stream:
-            json.dump({'sent': sent, 'received': plant.received, 'lost': lost,
-                       'rejected': rejected, 'rss': rss, 'growth_mb': growth,
-                       'worst_gap_s': plant.worst_gap, 'worst_error': worst_error,
+            json.dump({'sent': sent, 'received': plant.received, 'accepted': accepted,
+                       'lost_to_node': to_node, 'lost_to_plant': to_plant,
+                       'rejected': rejected, 'timeouts': timeouts, 'rss': rss,
+                       'growth_mb': growth, 'worst_gap_s': plant.worst_gap,
+                       'worst_late_s': plant.worst_late, 'worst_error': worst_error,
                        'resets': resets, 'diagnostics': last}, stream, indent=1)
-    return 0 if lost == 0 and rejected == 0 and growth < 5.0 else 1
+    stalled_node = in_run != 0 and plant.worst_late < MEASUREMENT_TIMEOUT
+    ok = to_node == 0 and to_plant == 0 and rejected == 0 and growth < 5.0 and not stalled_node
+    return 0 if ok else 1
 
 
 if __name__ == '__main__':
