@@ -38,7 +38,6 @@ from .conversions import EffortMessages, Rejected, clip_efforts, rejection, traj
 from .diagnostics import (
     Counts,
     DiagnosticsPublisher,
-    PythonLogsToRos,
     Report,
     ThrottledWarnings,
     guarded,
@@ -72,22 +71,8 @@ class CogIdNode(ReadOnlyNode):
         main() lets a stop signal raise (stop_signals.DeferredStop.interruptible).
         ``build``: False leaves the node bare (a managed node builds at configure)."""
         super().__init__(NODE_NAME, **kwargs)
-        # the package's Python log lines (the core's: e.g. a fallback to the Python kernels
-        # while the solver is built below) in ROS's format, under this node's name
-        self._python_logs: PythonLogsToRos | None = PythonLogsToRos.attach(self.get_logger())
-        if not build:
-            return
-        try:
-            self._build(command_line, interruptible)
-        except BaseException:
-            self.destroy_node()     # no half-built node left to rclpy's clean-up
-            raise
-
-    def destroy_node(self) -> None:
-        python_logs, self._python_logs = getattr(self, '_python_logs', None), None
-        if python_logs is not None:
-            python_logs.detach()
-        super().destroy_node()
+        if build:
+            self.build_or_destroy(lambda: self._build(command_line, interruptible))
 
     def _build(self, command_line: Sequence[str] | None,
                interruptible: Callable[[], ContextManager]) -> None:

@@ -6,7 +6,9 @@ values given to the node (params files, ``-p``) or from a table of
 (MechanismConfigError: main() turns it into exit status 2 and one line); it checks the
 QoS overrides; and once the node is built (:meth:`ReadOnlyNode.refuse_changes`) it
 refuses every parameter change with the node's own reason, naming the parameter (read-only,
-or not a parameter of the node). A subclass
+or not a parameter of the node). It also routes the package's Python log lines to the
+node's logger while it exists, and destroys a node whose build failed
+(:meth:`ReadOnlyNode.build_or_destroy`). A subclass
 provides ``internal_error(where, exc)``: the refusal is a guarded callback
 (:func:`.diagnostics.guarded`).
 """
@@ -20,7 +22,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..core import MechanismConfigError
-from .diagnostics import guarded
+from .diagnostics import PythonLogsToRos, guarded
 from .parameters import MAX_QOS_DEPTH, QOS_OVERRIDE_VALUES, NodeParameter
 
 #: parameters rclpy declares itself (not unknown to any node)
@@ -37,6 +39,24 @@ class ReadOnlyNode(Node):
         self._unknown_reason = f'not a parameter of {node_name}'
         self._refusing = False
         super().__init__(node_name, **kwargs)
+        # the package's Python log lines (the core's: e.g. a fallback to the Python kernels
+        # while a solver is built) in ROS's format, under this node's name
+        self._python_logs: PythonLogsToRos | None = PythonLogsToRos.attach(self.get_logger())
+
+    def build_or_destroy(self, build: Callable[[], None]) -> None:
+        """``build()`` the node; if it raises (a parameter, a stop signal), the half-built
+        node is destroyed first: none is left to rclpy's clean-up."""
+        try:
+            build()
+        except BaseException:
+            self.destroy_node()
+            raise
+
+    def destroy_node(self) -> None:
+        python_logs, self._python_logs = getattr(self, '_python_logs', None), None
+        if python_logs is not None:
+            python_logs.detach()
+        super().destroy_node()
 
     def override_values(self) -> dict[str, Any]:
         """name -> value of every parameter given to the node (params files, -p).

@@ -30,7 +30,7 @@ from ..description import Mechanism
 from .command_line import urdf_base_dir
 from .config import NodeConfig
 from .conversions import JointSelector
-from .diagnostics import DiagnosticsPublisher, PythonLogsToRos, ThrottledWarnings, guarded
+from .diagnostics import DiagnosticsPublisher, ThrottledWarnings, guarded
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
 from .read_only_node import ReadOnlyNode
 from .sim_diagnostics import EffortCounts, SimReport
@@ -52,18 +52,7 @@ class CogSimNode(ReadOnlyNode):
         """``command_line`` and ``interruptible`` as for cog_id_node
         (:class:`cog_id_ros.ros.node.CogIdNode`)."""
         super().__init__(NODE_NAME, **kwargs)
-        self._python_logs: PythonLogsToRos | None = PythonLogsToRos.attach(self.get_logger())
-        try:
-            self._build(command_line, interruptible)
-        except BaseException:
-            self.destroy_node()     # no half-built node left to rclpy's clean-up
-            raise
-
-    def destroy_node(self) -> None:
-        python_logs, self._python_logs = getattr(self, '_python_logs', None), None
-        if python_logs is not None:
-            python_logs.detach()
-        super().destroy_node()
+        self.build_or_destroy(lambda: self._build(command_line, interruptible))
 
     def _build(self, command_line: Sequence[str] | None,
                interruptible: Callable[[], ContextManager]) -> None:
