@@ -10,7 +10,9 @@ process, timers); ``activate`` opens the stream: until then nothing is published
 (setpoints and measured states that arrive are dropped, /diagnostics is silent);
 ``deactivate`` publishes ``timeout_behavior``'s command once, at the last pose served (or
 measured), and then nothing; ``cleanup`` releases what configure made (threads, the
-trajectory process, topics, timers, solvers); ``shutdown`` does the same from any state.
+trajectory process, topics, timers, solvers); ``shutdown`` does the same from any state
+(from active, after the command deactivate publishes). A transition that is not
+available from the current state is answered ``success: false``.
 """
 import contextlib
 from typing import Any, Callable, ContextManager, Sequence
@@ -34,6 +36,33 @@ class ManagedCogIdNode(LifecycleNodeMixin, CogIdNode):
         self._command_line = command_line
         CogIdNode.__init__(self, command_line, interruptible, build=False, **kwargs)
         LifecycleNodeMixin.__init__(self)
+        service = self._service_change_state
+        service.callback = self._refusing_unavailable(service.callback)
+
+    def _refusing_unavailable(self, change_state: Callable[[Any, Any], Any]
+                              ) -> Callable[[Any, Any], Any]:
+        """~/change_state with a transition id that is not available from the current state
+        answered ``success: false`` (and logged). rclpy raises instead (ros2/rclpy#1209):
+        the request then got no answer, and before the first configure the process ended."""
+        def serve(request: Any, response: Any) -> Any:
+            wanted = request.transition.id
+            available = {t[0]: t[1] for t in self._state_machine.available_transitions}
+            if not request.transition.label and wanted not in available:
+                state = self._state_machine.current_state[1]
+                self.get_logger().warning(
+                    f'change_state: transition {wanted} is not available in state {state}: '
+                    'refused (available: ' + ', '.join(f'{i} {label}' for i, label in
+                                                       sorted(available.items())) + ')')
+                response.success = False
+                return response
+            return change_state(request, response)
+        return serve
+
+    def internal_error(self, where: str, exc: BaseException) -> None:
+        if 'counts' not in self.__dict__:       # before the first configure: nothing to count
+            self.get_logger().error(f'{where} failed: {type(exc).__name__}: {exc}')
+            return
+        CogIdNode.internal_error(self, where, exc)
 
     # --- the node's threads: started at configure, not by main() --------------------------
 
@@ -78,12 +107,17 @@ class ManagedCogIdNode(LifecycleNodeMixin, CogIdNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._leave_active('inactive')
+        return TransitionCallbackReturn.SUCCESS
+
+    def _leave_active(self, now: str) -> None:
+        """Stop serving and publish timeout_behavior's command once (deactivate, or shutdown
+        from active: the motors are not left with the last command)."""
         with self.lock:
             self.active = False
             stream = self.measurements if self.measurements is not None else self.setpoints
             what = self.apply_timeout_behavior(stream.last_pose)
-        self.get_logger().info(f'inactive: {what or "nothing published"}, then nothing')
-        return TransitionCallbackReturn.SUCCESS
+        self.get_logger().info(f'{now}: {what or "nothing published"}, then nothing')
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._release()
@@ -91,6 +125,8 @@ class ManagedCogIdNode(LifecycleNodeMixin, CogIdNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self.active:
+            self._leave_active('shutting down')
         self.active = False
         if self._made:
             self._release()

@@ -273,7 +273,8 @@ def test_diagnostics_report_mode_tracking_error_and_age(loops):
 def test_managed_node_through_change_state(ros_process, rclpy_context):
     """Unconfigured, then inactive: nothing published (commands, joint_effort,
     /diagnostics); active: one command per measured state; deactivate: the hold command of
-    the last measured pose once, then nothing; cleanup, configure and activate again."""
+    the last measured pose once, then nothing; cleanup, configure and activate again;
+    shutdown from active: the hold command once; a transition not available: refused."""
     namespace = '/managed'
     proc = ros_process(['cog_id_node', '--ros-args', '--params-file', MECHANISMS['four_bar'],
                         '-r', f'__ns:={namespace}', '-p', 'managed:=true',
@@ -309,8 +310,12 @@ def test_managed_node_through_change_state(ros_process, rclpy_context):
     try:
         assert change.wait_for_service(30) and get.wait_for_service(30), proc.output
         assert state() == 'unconfigured'
+        # a transition not available here is refused, answered (rclpy raised: no answer,
+        # and before the first configure the process ended)
+        assert not transition(Transition.TRANSITION_ACTIVATE) and state() == 'unconfigured'
         send_some()
         assert transition(Transition.TRANSITION_CONFIGURE) and state() == 'inactive'
+        assert not transition(Transition.TRANSITION_CONFIGURE) and state() == 'inactive'
         assert wait_until(lambda: plant.states.get_subscription_count() > 0)
         send_some()
         time.sleep(1.5)                  # more than diagnostics_period
@@ -329,8 +334,13 @@ def test_managed_node_through_change_state(ros_process, rclpy_context):
         assert transition(Transition.TRANSITION_CONFIGURE)
         assert transition(Transition.TRANSITION_ACTIVATE) and state() == 'active'
         assert wait_until(lambda: plant.states.get_subscription_count() > 0)
-        plant.run(0.05)
+        out = plant.run(0.05)
+        count = len(plant.commands)
+        # shutdown from active leaves the motors with the hold command, as deactivate does
         assert transition(Transition.TRANSITION_ACTIVE_SHUTDOWN) and state() == 'finalized'
+        assert wait_until(lambda: len(plant.commands) == count + 1)
+        hold = cog_id_ros.InverseDynamics(mech).torques(out['positions'][-1], [0.0], [0.0])
+        assert np.allclose(plant.commands[-1], hold, atol=1e-9)
     finally:
         plant.close()
     assert proc.stop() == 0, proc.output
