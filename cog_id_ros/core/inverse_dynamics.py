@@ -42,6 +42,11 @@ class InverseDynamics:
     #: this times the mechanism's length scale (continuation.py); longer moves are followed
     #: in steps so that the solver stays on the assembly branch it is on. Read at construction.
     continuation_step = 0.1
+    #: whether one sample (of torques, sample_torques, forward_dynamics) with an actuator
+    #: outside its position limits (joints.<name>.lower / upper) is refused (SetpointError
+    #: 'limit'); False serves it (a measured pose: the robot is where it is, and its
+    #: controller must act there). Batches are checked against the limits either way.
+    check_position_limits = True
 
     def __init__(self, mechanism: Mechanism, backend: str = 'auto') -> None:
         if not isinstance(mechanism, Mechanism):
@@ -81,7 +86,8 @@ class InverseDynamics:
         Raises ClosureError, SingularConfigurationError or SetpointError for the first sample
         that cannot be served (``.sample`` is its index); the warm start is then unchanged.
         """
-        q, qd, qdd, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, qdd)
+        q, qd, qdd, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, qdd,
+                                       self.check_position_limits)
         if single:
             return np.array(self._serve_one(q, qd, qdd))
         return self.evaluate(q, qd, qdd).torques
@@ -97,7 +103,8 @@ class InverseDynamics:
         SingularConfigurationError also for an inertia that cannot be solved.
         """
         positions, rates_in, efforts, single = setpoints(
-            self.mechanism, self._serial.wrapping, q, qd, tau, labels=LABELS)
+            self.mechanism, self._serial.wrapping, q, qd, tau, self.check_position_limits,
+            labels=LABELS)
         if self._forward is None:       # (its kernels are loaded, or built, now)
             self._forward = ForwardSolver(self._solved, self._kernels, self.continuation_step,
                                           self.mechanism.joints_at)
@@ -121,7 +128,8 @@ class InverseDynamics:
         The same numbers, state and errors as :meth:`torques` on one sample, without the
         numpy round trip (cog_id_node calls this for every setpoint).
         """
-        q, qd, qdd, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, qdd)
+        q, qd, qdd, single = setpoints(self.mechanism, self._serial.wrapping, q, qd, qdd,
+                                       self.check_position_limits)
         if not single:
             raise SetpointError(f'sample_torques takes one sample (one number per active '
                                 f'joint), got shape {np.shape(q)}: use torques() for a batch')

@@ -32,6 +32,8 @@ REASONS = {
              'stopped, or fell behind): too late to serve',
     'jump': 'an active joint moved farther than max_setpoint_step since the previous '
             'setpoint (after unwrapping revolute joints)',
+    'velocity': 'a measured velocity of an active joint beyond max_measured_velocity '
+                '(feedback modes)',
     'limit': "an active joint's position outside its limits (joints.<name>.lower / upper, "
              'or the URDF <limit>)',
     'closure': 'the loops cannot be closed at this pose',
@@ -72,7 +74,8 @@ def rejection(exc: BaseException | None, redundant: object = None) -> Rejected:
     ``redundant`` is no longer needed (kept for callers that still pass it).
     """
     reason = getattr(exc, 'reason', None)
-    if reason not in REASONS or reason in ('empty', 'missing_joint', 'stamp', 'stale', 'jump'):
+    if reason not in REASONS or reason in ('empty', 'missing_joint', 'stamp', 'stale', 'jump',
+                                           'velocity'):
         reason = 'solver'
     return Rejected(reason, str(exc))
 

@@ -42,6 +42,10 @@ class FeedbackMode:
     def __init__(self, solver: Any, measured_solver: Any, config: NodeConfig) -> None:
         self.solver = solver                      # setpoints: the node's solver
         self.measured_solver = measured_solver    # measured states: a solver of their own
+        # a measured pose beyond a position limit is commanded from (the law pulls it back
+        # toward the setpoint, which is checked against the limits): refused, the robot
+        # would be left without its controller exactly where it overshot
+        measured_solver.check_position_limits = False
         self.config = config
         self.unwrap = list(config.unwrap)
         self.zeros = [0.0] * len(config.active_joints)

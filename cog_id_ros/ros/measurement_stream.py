@@ -5,8 +5,9 @@ on, or a Rejected (no physics).
 checks that keep a bad measurement from the motors, in order: its age (published longer
 than ``measurement_timeout`` ago: ``stale``), the active joints' positions and velocities
 (:func:`.conversions.setpoint_arrays`: names, lengths, ``non_finite``; velocities required
-where the mode needs them), and, within a stream, unwrapping and the step since the last
-accepted measurement (``jump``). Whether the loops close at the measured pose is the
+where the mode needs them, none faster than ``max_measured_velocity``: ``velocity``),
+and, within a stream, unwrapping and the step since the last accepted measurement
+(``jump``). Whether the loops close at the measured pose is the
 mode's solve (:mod:`.feedback`). The node calls :meth:`MeasurementStream.accept` once the
 command is published; :meth:`MeasurementStream.stopped_for` says when no measurement was
 accepted for the timeout (``timeout_behavior`` then applies, once, and the next
@@ -32,6 +33,7 @@ class MeasurementStream:
         self.selector = JointSelector(self.active_joints)
         self.unwrap = config.unwrap
         self.max_step = list(config.max_measurement_step)
+        self.max_velocity = list(config.max_measured_velocity)
         self.timeout = config.measurement_timeout
         self.max_age_ns = int(config.measurement_timeout * NANOSECONDS)
         self.needs_velocities = needs_velocities
@@ -54,6 +56,10 @@ class MeasurementStream:
                 raise Rejected('malformed', 'no velocities: this control_mode needs the '
                                             'measured velocity of every active joint')
             v = [0.0] * len(q)
+        for joint, rate, limit in zip(self.active_joints, v, self.max_velocity):
+            if abs(rate) > limit:
+                raise Rejected('velocity', f'measured velocity of {joint} is {rate:.6g}, beyond '
+                               f'max_measured_velocity ({limit:g}): not commanded from')
         previous = None if self.stopped else self.last_pose
         if previous is not None:
             q = [nearest_turn(x, ref) if wrap else x

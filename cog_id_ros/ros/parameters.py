@@ -40,6 +40,8 @@ CONTROL_MODES = ('feedforward', 'computed_torque', 'pd_feedforward', 'gravity_co
 #: default largest move of an active joint between two measured states (rad, m): 200 rad/s
 #: or 20 m/s at 1 kHz, far beyond a physical robot's, far below an encoder glitch's turn
 MEASUREMENT_MAX_STEP = {'rad': 0.2, 'm': 0.02}
+#: default largest measured speed of an active joint (rad/s, m/s): the same bound as a rate
+MEASUREMENT_MAX_VELOCITY = {'rad': 200.0, 'm': 20.0}
 
 #: QoS overrides the node honours: the policies and their values (depth: 1..MAX_QOS_DEPTH)
 QOS_OVERRIDE_VALUES = {
@@ -369,6 +371,16 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'farther than this from the last accepted one (after unwrapping) is '
                     'rejected (`jump`), never commanded from; after `measurement_timeout` '
                     'without an accepted one the next starts a new stream (`.inf`: no check)'),
+    NodeParameter(
+        'max_measured_velocity', 'double[]', None, 'per_joint', what='velocity',
+        per_joint_default=lambda joint_type: MEASUREMENT_MAX_VELOCITY[
+            joints.kind(joint_type).unit],  # type: ignore[union-attr, index]
+        default_text=f'{MEASUREMENT_MAX_VELOCITY["rad"]!r} rad/s revolute, '
+                     f'{MEASUREMENT_MAX_VELOCITY["m"]!r} m/s prismatic',
+        description='feedback modes, rad/s or m/s: a measured state whose velocity of an '
+                    'active joint is larger than this in magnitude is rejected (`velocity`), '
+                    'never commanded from: a corrupt velocity would reach the motors through '
+                    'kd and the velocity terms (`.inf`: no check)'),
     NodeParameter(
         'managed', 'bool', False, 'bool',
         description='a lifecycle node (`~/change_state`, `~/get_state`): it starts '

@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip('rclpy')
 
 from cog_id_ros import InverseDynamics, Mechanism, MechanismConfigError  # noqa: E402
-from cog_id_ros.core import ClosureError  # noqa: E402
+from cog_id_ros.core import ClosureError, SetpointError  # noqa: E402
 from cog_id_ros.ros.conversions import Rejected  # noqa: E402
 from cog_id_ros.ros.measurement_stream import MeasurementStream  # noqa: E402
 from cog_id_ros.ros.modes import FEEDBACK_MODES, make_mode  # noqa: E402
@@ -204,6 +204,41 @@ def test_underdamped_gains_are_warned_about():
 class Msg:
     def __init__(self, names, position, velocity=()):
         self.name, self.position, self.velocity, self.effort = names, position, velocity, []
+
+
+def test_a_corrupt_measured_velocity_never_reaches_the_motors():
+    """A finite but absurd velocity (an encoder's glitch, a unit error) would reach the
+    efforts through kd and the velocity terms: rejected beyond max_measured_velocity."""
+    mech = Mechanism.from_params_file('config/five_bar.yaml')
+    names = list(mech.active_joints)
+    stream = MeasurementStream(config_for(mech), needs_velocities=True)
+    for bad_rate in (1e3, -1e6, 1e150):
+        with pytest.raises(Rejected) as bad:
+            stream.take(Msg(names, [2.0, 1.14], [bad_rate, 0.0]))
+        assert bad.value.reason == 'velocity' and 'max_measured_velocity' in str(bad.value)
+    assert stream.take(Msg(names, [2.0, 1.14], [150.0, -150.0]))[1] == [150.0, -150.0]
+    free = MeasurementStream(config_for(mech, max_measured_velocity=[math.inf]), True)
+    assert free.take(Msg(names, [2.0, 1.14], [1e6, 0.0]))[1] == [1e6, 0.0]
+    slow = MeasurementStream(config_for(mech, max_measured_velocity=[1.0, 2.0]), True)
+    with pytest.raises(Rejected):
+        slow.take(Msg(names, [2.0, 1.14], [0.5, 2.5]))
+
+
+def test_a_measured_pose_beyond_a_position_limit_is_commanded_back():
+    """The URDF five-bar's motor/1 overshoots its limit (3 rad): the setpoint there is
+    refused ('limit'), the measured pose is served, and computed torque pulls it back."""
+    mech = Mechanism.from_params_file('config/five_bar_robot.yaml')
+    mode, _ = mode_for(mech, 'computed_torque', kp=[400.0], kd=[40.0])
+    with pytest.raises(SetpointError) as refused:
+        InverseDynamics(mech).sample_torques([3.05, 0.0])
+    assert refused.value.reason == 'limit'
+    mode.efforts([2.9, 0.0], [0.0, 0.0], [0.0, 0.0])
+    tau = np.array(mode.command([3.05, 0.0], [0.0, 0.0]))
+    solver = InverseDynamics(mech)
+    solver.check_position_limits = False
+    solver.sample_torques([2.9, 0.0])          # the same branch as the mode's solver
+    qdd = solver.forward_dynamics([3.05, 0.0], [0.0, 0.0], tau)
+    assert np.allclose(qdd, [400.0 * (2.9 - 3.05), 0.0], rtol=1e-7, atol=1e-7)
 
 
 def test_measured_states_checked():
