@@ -51,16 +51,24 @@ class ComputedTorque(FeedbackMode):
         return (np.array(qdd_d) + v_a @ w).tolist()
 
     def gain_warnings(self) -> list[str]:
-        joints = self.config.active_joints
-        ratios = [kd / (2.0 * math.sqrt(kp)) if kp > 0 else math.inf
-                  for kp, kd in zip(self.kp, self.kd)]
+        joints = list(self.config.active_joints)
+        used = self.primary if self.redundant else range(len(joints))   # the law's joints
+        names = [joints[a] for a in used]
+        kp, kd = [self.kp[a] for a in used], [self.kd[a] for a in used]
+        ratios = [d / (2.0 * math.sqrt(p)) if p > 0 else math.inf for p, d in zip(kp, kd)]
         out = []
-        slow = underdamped(joints, ratios)
+        slow = underdamped(names, ratios)
         if slow:
             out.append('computed_torque: underdamped (kd < 2 sqrt(kp)), the error overshoots: '
                        + ', '.join(slow))
-        idle = [j for j, kp, kd in zip(joints, self.kp, self.kd) if kp == 0 and kd == 0]
+        idle = [j for j, p, d in zip(names, kp, kd) if p == 0 and d == 0]
         if idle:
             out.append(f"computed_torque: kp and kd are 0 for {', '.join(idle)}: no feedback "
                        'there (feed-forward at the measured pose)')
+        unused = [a for a in range(len(joints)) if a not in used and
+                  (self.kp[a], self.kd[a]) not in set(zip(kp, kd))]
+        if unused:
+            out.append('computed_torque: redundant actuation: the law acts on the primary '
+                       f"actuators ({', '.join(names)}); the gains given for "
+                       f"{', '.join(joints[a] for a in unused)} are not used")
         return out

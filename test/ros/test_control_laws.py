@@ -241,6 +241,19 @@ def test_a_measured_pose_beyond_a_position_limit_is_commanded_back():
     assert np.allclose(qdd, [400.0 * (2.9 - 3.05), 0.0], rtol=1e-7, atol=1e-7)
 
 
+def test_redundant_computed_torque_warns_only_about_the_gains_it_uses():
+    """Five-bar with three actuators: the law acts on the primary ones (j1, j5); j3's gains
+    are said to be unused, not checked as if they acted."""
+    red = Mechanism.from_params_file('config/five_bar_redundant.yaml')
+    mode, _ = mode_for(red, 'computed_torque', kp=[400.0, 400.0, 1.0], kd=[40.0, 40.0, 0.1])
+    warnings = mode.gain_warnings()
+    assert len(warnings) == 1 and 'j3 are not used' in warnings[0], warnings
+    mode, _ = mode_for(red, 'computed_torque', kp=[400.0, 1.0, 400.0], kd=[40.0, 0.1, 40.0])
+    assert any('underdamped' in w and 'j5' in w for w in mode.gain_warnings())
+    mode, _ = mode_for(red, 'computed_torque', kp=[400.0], kd=[40.0])
+    assert mode.gain_warnings() == []
+
+
 def test_measured_states_checked():
     mech = Mechanism.from_params_file('config/paper_four_bar_a.yaml')
     config = config_for(mech, measurement_timeout=0.1)
