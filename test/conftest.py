@@ -1,10 +1,11 @@
 """Shared fixtures: every test session talks DDS on a ROS_DOMAIN_ID of its own.
 
-The domain is chosen from the pid (1..101) and set in the environment when this file is
-imported, i.e. before any test module can call ``rclpy.init``; subprocesses inherit it
-(``ros_env`` gives a copy for ``subprocess``). Discovery stays on this machine
+The domain is chosen from the run's pid (1..100; under pytest-xdist the workers' parent's,
+plus the worker's index, so the two workers of a run never share one) and set in the
+environment when this file is imported, i.e. before any test module can call
+``rclpy.init``; subprocesses inherit it (``ros_env`` gives a copy for ``subprocess``). Discovery stays on this machine
 (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), so parallel test runs never cross-talk.
-Set ``COG_ID_TEST_DOMAIN_ID`` to force a domain.
+Set ``COG_ID_TEST_DOMAIN_ID`` to force a domain (each worker adds its index to it).
 
 Fixtures:
   ros_env        environment for ROS subprocesses (the session's domain)
@@ -23,7 +24,10 @@ import time
 
 import pytest
 
-DOMAIN_ID = int(os.environ.get('COG_ID_TEST_DOMAIN_ID', 1 + os.getpid() % 101))
+_WORKER = os.environ.get('PYTEST_XDIST_WORKER', '')      # 'gw0', 'gw1': pytest-xdist's
+_INDEX = int(_WORKER[2:]) if _WORKER.startswith('gw') else 0
+_BASE = os.getppid() if _WORKER else os.getpid()           # the run's, shared by its workers
+DOMAIN_ID = int(os.environ.get('COG_ID_TEST_DOMAIN_ID', 1 + (_BASE % 20) * 5)) + _INDEX % 5
 os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.pop('ROS_STATIC_PEERS', None)

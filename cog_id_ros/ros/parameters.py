@@ -40,7 +40,8 @@ CONTROL_MODES = ('feedforward', 'computed_torque', 'pd_feedforward', 'gravity_co
 #: default largest move of an active joint between two measured states (rad, m): 200 rad/s
 #: or 20 m/s at 1 kHz, far beyond a physical robot's, far below an encoder glitch's turn
 MEASUREMENT_MAX_STEP = {'rad': 0.2, 'm': 0.02}
-#: default largest measured speed of an active joint (rad/s, m/s): the same bound as a rate
+#: default largest measured speed of an active joint (rad/s, m/s): the rate that
+#: MEASUREMENT_MAX_STEP allows at 1 kHz
 MEASUREMENT_MAX_VELOCITY = {'rad': 200.0, 'm': 20.0}
 
 #: QoS overrides the node honours: the policies and their values (depth: 1..MAX_QOS_DEPTH)
