@@ -210,8 +210,8 @@ def report(args, sent, plant, samples, resets, worst_error):
           f'{args.minutes:g} min')
     print(f'measured states sent {sent}: node accepted {accepted}, rejected {rejected}, '
           f'lost on the way to it {to_node}; commands received {plant.received} '
-          f'(timeout commands {timeouts}: the end of the stream is one), lost on the way back {to_plant}; setpoints lost '
-          f"{last.get('setpoints_lost')}")
+          f'(timeout commands {timeouts}: the end of the stream is one), lost on the way '
+          f"back {to_plant}; setpoints lost {last.get('setpoints_lost')}")
     print(f'worst gap between commands {plant.worst_gap * 1e3:.1f} ms (ending at t = '
           f'{plant.worst_gap_at:.3f} s); the plant (this '
           f'process) at worst {plant.worst_late * 1e3:.1f} ms behind its clock (t = '

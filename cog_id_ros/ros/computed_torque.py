@@ -65,8 +65,9 @@ class ComputedTorque(FeedbackMode):
         if idle:
             out.append(f"computed_torque: kp and kd are 0 for {', '.join(idle)}: no feedback "
                        'there (feed-forward at the measured pose)')
+        used_gains = set(zip(kp, kd))
         unused = [a for a in range(len(joints)) if a not in used and
-                  (self.kp[a], self.kd[a]) not in set(zip(kp, kd))]
+                  (self.kp[a], self.kd[a]) not in used_gains]
         if unused:
             out.append('computed_torque: redundant actuation: the law acts on the primary '
                        f"actuators ({', '.join(names)}); the gains given for "
