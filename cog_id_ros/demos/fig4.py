@@ -138,14 +138,18 @@ def node_arguments(n_setpoints):
     """ROS arguments of the node in ``namespace`` for a run of ``n_setpoints``: returns
     ``namespace -> [arguments]``."""
     def extra(namespace):
-        # joint_effort's writer keeps the whole run (at most the node's bound on depths): a
-        # reliable writer resends only what its history still holds, so with the default
-        # 100 a recorder stalled for 0.1 s at 1 kHz would lose efforts for good. The
-        # setpoint side keeps the node's own QoS: what the node drops there is its own
-        # behaviour under load, which the demo reports.
+        # Both queues of the node hold the whole run (at most the node's bound on depths).
+        # joint_effort's writer: a reliable writer resends only what its history still
+        # holds, so with the default 100 a recorder stalled for 0.1 s at 1 kHz would lose
+        # efforts for good. joint_setpoint's subscription: the default 100 is 0.1-0.2 s of
+        # this stream, and a node starved of CPU that long (a loaded 2-core machine: 77 of
+        # 1001 lost in one CI run) would drop setpoints the figure needs; with the whole
+        # run queued it answers them late instead. A controller wants the opposite (drop
+        # stale setpoints, the node's default); the demo wants every one.
+        depth = min(n_setpoints, MAX_QOS_DEPTH)
         return ['-p', f'diagnostics_period:={DIAGNOSTICS_PERIOD}',
-                '-p', f'qos_overrides.{namespace}/joint_effort.publisher.depth:='
-                      f'{min(n_setpoints, MAX_QOS_DEPTH)}']
+                '-p', f'qos_overrides.{namespace}/joint_setpoint.subscription.depth:={depth}',
+                '-p', f'qos_overrides.{namespace}/joint_effort.publisher.depth:={depth}']
     return extra
 
 
@@ -401,9 +405,9 @@ def run_cases(procs, t):
         # one effort per setpoint at most: a queue of len(t) never pushes one out
         recorder = recording.Recorder([f'{case[2]}/joint_effort' for case in CASES], len(t))
         for key, _, namespace, joints, _ in CASES:
-            # the publisher's history holds the whole run: a setpoint the node was slow to
-            # acknowledge is resent, so what is lost is lost in the node's own queue (which
-            # it counts); both players exist from the start so both discoveries overlap
+            # the publisher's history holds the whole run, as the node's queue does: a
+            # setpoint the node was slow to acknowledge is resent, and what the node still
+            # lost it counts; both players exist from the start so both discoveries overlap
             players[key] = Player(joints, topic=f'{namespace}/joint_setpoint',
                                   node_name=f'fig4_player_{key}', context=context,
                                   depth=len(t))

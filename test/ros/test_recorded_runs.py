@@ -168,33 +168,34 @@ def check_demo_result(returncode, stdout, stderr, tmp_path):
 
 # --- the demo under load, and with a stalled node -----------------------------------------------
 
-def test_fig4_under_load_answers_everything_or_says_where_setpoints_went(ros_env, tmp_path):
+def test_fig4_under_load_answers_and_records_every_setpoint(ros_env, tmp_path):
     """Reliability 2, item 13: on a loaded machine the demo lost up to 343 of 2001 setpoints
-    and exited 0. With two busy processes per core beside it, it now either records
-    2001/2001 of both nodes and exits 0, or exits 3 placing every missing setpoint (the CSVs
-    agree with the numbers it prints)."""
+    and exited 0; then it exited 3 saying where (the node's own queue of 100). Since the
+    demo gives the node's setpoint queue the whole run (a CI run of the suite in two
+    workers lost 77 of 1001 there), two busy processes per core beside it change nothing:
+    2001/2001 of both nodes recorded, exit 0."""
     with cpu_hogs():
         proc = run_fig4(ros_env, tmp_path / 'fig4.png')
         stdout, stderr = proc.communicate(timeout=240)
-    missing = check_demo_result(proc.returncode, stdout, stderr, tmp_path)
-    print(f'under load: exit {proc.returncode}, missing {missing}')
+    assert proc.returncode == 0, stdout + stderr
+    check_demo_result(proc.returncode, stdout, stderr, tmp_path)
 
 
-def test_fig4_with_a_stalled_node_exits_non_zero_and_names_the_node(ros_env, tmp_path):
-    """Reliability 2, item 13: node (b) stopped 0.4 s out of every 0.6 s drops setpoints
-    from its full queue (it counts them); the demo used to print a note and exit 0. Now:
-    exit 3, and the line of /fig4_b says the node lost them."""
+def test_fig4_with_a_stalled_node_still_answers_every_setpoint(ros_env, tmp_path):
+    """Node (b) stopped 0.4 s out of every 0.6 s: with the node's default queue (100
+    setpoints) it dropped setpoints and the demo exited 3 (Reliability 2, item 13). The
+    demo now starts its nodes with a setpoint queue as deep as the run: the stalled node
+    answers late, every setpoint is answered and recorded, exit 0."""
     proc = run_fig4(ros_env, tmp_path / 'fig4.png')
 
     def node_b():
         return next((c for c in children(proc.pid) if '__ns:=/fig4_b' in cmdline(c)), None)
 
-    with stalling(node_b):
+    with stalling(node_b) as found:
         stdout, stderr = proc.communicate(timeout=240)
-    missing = check_demo_result(proc.returncode, stdout, stderr, tmp_path)
-    assert proc.returncode == 3 and missing['/fig4_b'] > 0, stdout + stderr
-    assert re.search(r'^/fig4_b: node: \d+ setpoints lost before the node took them',
-                     stderr, re.M), stderr
+    assert found, 'node (b) was never found to stall'
+    assert proc.returncode == 0, stdout + stderr
+    check_demo_result(proc.returncode, stdout, stderr, tmp_path)
 
 
 def test_fig4_with_a_stalled_recorder_exits_non_zero_and_names_the_recorder(
