@@ -105,7 +105,10 @@ class Account:
                     'recorder lost them')
         parts: list[str] = []
         if self.lost > 0:  # type: ignore[operator]
-            parts.append(f'node: {self.lost} setpoints lost before the node took them')
+            parts.append(f'node: {self.lost} setpoints lost before the node took them (its '
+                         'joint_setpoint queue ran over; to keep them all, start the node '
+                         'with -p qos_overrides./<namespace>/joint_setpoint.subscription.'
+                         'depth:=<number of setpoints>)')
         if self.rejected > 0:  # type: ignore[operator]
             parts.append(f'node: {self.rejected} setpoints rejected (its log says why)')
         if self.uncounted > 0:
