@@ -43,6 +43,11 @@ REASONS = {
     'solver': 'any other setpoint the solver refuses',
 }
 
+#: the reasons of REASONS a measured state can be rejected for (feedback modes): not
+#: ``stamp`` (a measurement's header may carry the plant's time; its age is DDS's) nor
+#: ``limit`` (a measured pose beyond a limit is commanded from)
+MEASUREMENT_REASONS = tuple(r for r in REASONS if r not in ('stamp', 'limit'))
+
 #: reasons a whole trajectory can be refused for besides those of REASONS (its points)
 TRAJECTORY_REASONS = {
     'too_long': 'more points than max_trajectory_points',
@@ -129,18 +134,20 @@ class JointSelector:
         return [where[j] for j in self.active_joints]
 
 
-def _pick(values: Sequence[float], index: Sequence[int], what: str) -> list[float]:
+def _pick(values: Sequence[float], index: Sequence[int], what: str,
+          kind: str) -> list[float]:
     """The active entries of a message array as floats; Rejected for NaN or infinity."""
     out = [values[i] for i in index]
     if not all(map(math.isfinite, out)):
         bad = next(v for v in out if not math.isfinite(v))
-        raise Rejected('non_finite', f'{what} {bad} (setpoints must be finite)')
+        raise Rejected('non_finite', f'{what} {bad} ({kind}s must be finite)')
     return out
 
 
-def setpoint_arrays(msg: JointState,
-                    selector: JointSelector) -> tuple[list[float], list[float] | None]:
-    """(positions, velocities or None) of the active joints of a JointState setpoint.
+def setpoint_arrays(msg: JointState, selector: JointSelector, kind: str = 'setpoint'
+                    ) -> tuple[list[float], list[float] | None]:
+    """(positions, velocities or None) of the active joints of a JointState setpoint (or
+    of what ``kind`` names in the messages: 'measured state').
 
     Positions are required; velocities are optional (an empty array); efforts are ignored
     but, like velocities, must have one entry per name when present. Raises Rejected.
@@ -148,15 +155,15 @@ def setpoint_arrays(msg: JointState,
     names, position, velocity = msg.name, msg.position, msg.velocity   # each read is a property
     n = len(names)
     if n == 0 and len(position) == 0:
-        raise Rejected('empty', 'empty setpoint: no joint names and no positions')
+        raise Rejected('empty', f'empty {kind}: no joint names and no positions')
     for field, values in (('position', position), ('velocity', velocity),
                           ('effort', msg.effort)):
         size = len(values)
         if size != n and (field == 'position' or size):
             raise Rejected('malformed', f'{n} names but {size} {field} values')
     index = selector.indices(names)
-    q = _pick(position, index, 'position')
-    v = _pick(velocity, index, 'velocity') if len(velocity) else None
+    q = _pick(position, index, 'position', kind)
+    v = _pick(velocity, index, 'velocity', kind) if len(velocity) else None
     return q, v
 
 
@@ -372,3 +379,18 @@ class EffortMessages:
         pose.position = positions
         pose.velocity = velocities
         return pose
+
+
+#: the core's advice for a setpoint it cannot reach (core/sample_solve.py), and what it
+#: means for a measured state: the robot does not move in such steps, its encoders jump
+UNREACHABLE_ADVICE = ('. Send setpoints closer together (the solver follows the assembly '
+                      'branch in short steps)')
+MEASURED_ADVICE = ('; a measured pose that far from the last one is a jump of the encoders '
+                   '(or max_measurement_step is too large)')
+
+
+def of_measured_state(text: str) -> str:
+    """A core message about the sample it solved ("cannot reach the setpoint ...", "the
+    loops cannot be closed at this setpoint"), said of the measured state it was."""
+    text = text.replace(UNREACHABLE_ADVICE, MEASURED_ADVICE)
+    return text.replace('setpoints', 'measured states').replace('setpoint', 'measured state')

@@ -22,7 +22,7 @@ import numpy as np
 from rclpy.event_handler import PublisherEventCallbacks
 
 from ..core import CogIdError
-from .conversions import REASONS, TRAJECTORY_REASONS
+from .conversions import MEASUREMENT_REASONS, REASONS, TRAJECTORY_REASONS
 from .topics import DIAGNOSTICS_QOS_DEPTH, TOPICS
 
 #: keys of /diagnostics besides rejected.<reason> and trajectories_rejected.<reason>
@@ -185,7 +185,7 @@ class Counts:
         self.period_problems = 0              # rejections + clipping since the last report
         self.period_unstamped = 0             # setpoints stamped 0 since the last report
         # feedback modes: measured states
-        self.measurement_rejected = collections.Counter(dict.fromkeys(REASONS, 0))
+        self.measurement_rejected = collections.Counter(dict.fromkeys(MEASUREMENT_REASONS, 0))
         self.last_measurement_rejection = ''
         self.last_measurement_was_rejected = False
         self.tracking_error: list[float] = []     # q_d - q_m at the last command

@@ -50,7 +50,7 @@ class MeasurementStream:
         measurement_timeout ago is stale)."""
         if info is not None:
             self._check_age(info)
-        q, v = setpoint_arrays(msg, self.selector)
+        q, v = setpoint_arrays(msg, self.selector, 'measured state')
         if v is None:
             if self.needs_velocities:
                 raise Rejected('malformed', 'no velocities: this control_mode needs the '

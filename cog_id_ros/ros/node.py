@@ -34,7 +34,14 @@ from ..core import CogIdError, InverseDynamics
 from ..description import Mechanism
 from .command_line import urdf_base_dir
 from .config import NodeConfig, start_up_summary
-from .conversions import EffortMessages, Rejected, clip_efforts, rejection, trajectory_point_count
+from .conversions import (
+    EffortMessages,
+    Rejected,
+    clip_efforts,
+    of_measured_state,
+    rejection,
+    trajectory_point_count,
+)
 from .diagnostics import (
     Counts,
     DiagnosticsPublisher,
@@ -327,7 +334,7 @@ class CogIdNode(ReadOnlyNode):
             return
         except CogIdError as exc:
             bad = rejection(exc)
-            counts.reject_measurement(bad.reason, str(bad))
+            counts.reject_measurement(bad.reason, of_measured_state(str(bad)))
             return
         efforts = self._send(efforts, start)
         self.effort_pub.publish(self.outputs.state_for(msg.header, q, v, efforts))

@@ -30,6 +30,7 @@ from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 
 import cog_id_ros  # noqa: E402
 from cog_id_ros.demos.lockstep_plant import LockstepPlant  # noqa: E402
+from cog_id_ros.ros.conversions import MEASUREMENT_REASONS  # noqa: E402
 
 H = 0.001                      # s: the plant's step
 MECHANISMS = {'four_bar': 'config/paper_four_bar_a.yaml', 'five_bar': 'config/five_bar.yaml',
@@ -206,6 +207,13 @@ def test_nan_jumping_and_unclosable_measurements_never_reach_the_motors(loops):
     values = loop.values_after(after + 0.1)
     assert int(values['measurements_rejected.non_finite']) >= 1
     assert int(values['measurements_rejected.jump']) >= 2
+    # one count per reason a measured state can have (no `stamp`, no `limit`: control.md)
+    assert {key.split('.', 1)[1] for key in values if key.startswith('measurements_rejected.')} \
+        == set(MEASUREMENT_REASONS)
+    # said of a measured state, not of a setpoint (adversarial check of issue 22: "setpoints
+    # must be finite", "Send setpoints closer together" for the encoders' readings)
+    assert wait_until(lambda: '(measured states must be finite)' in loop.proc.output), \
+        loop.proc.output
     # a stream that starts at a pose that cannot close: rejected by the solve itself
     far = loops('stewart', 'gravity_compensation', '-p', 'max_measurement_step:=[.inf]')
     far.sim.reset()
@@ -216,6 +224,8 @@ def test_nan_jumping_and_unclosable_measurements_never_reach_the_motors(loops):
     values = far.values_after(time.monotonic() + 0.1)
     assert int(values['measurements_rejected.unreachable']) + \
         int(values['measurements_rejected.closure']) >= 1
+    said = values['last_measurement_rejection']
+    assert 'measured state' in said and 'setpoint' not in said, said
     far.plant.run(0.01)                                  # and the next good one is served
 
 
