@@ -118,7 +118,11 @@ def other_node(ros_process):
 def test_fig4_refuses_a_domain_where_its_nodes_names_are_taken(other_node, ros_env, tmp_path):
     """Reliability 2, adversarial check: with a node named /fig4_a/cog_id_node in the domain,
     the demo ran beside it and mixed their answers. It now refuses with exit status 2 and
-    one line naming the node and saying to set another ROS_DOMAIN_ID, without playing."""
+    one line naming the node and saying to set another ROS_DOMAIN_ID, without playing.
+    (On a loaded machine discovery can take longer than the looks before playing: one CI
+    run of the suite in two workers beside a CPU hog found the node only after its runs.
+    The demo then refuses the data it recorded, exit 2 and the line saying so, which is
+    what it documents; the looks before playing are tested on their own below.)"""
     started = time.monotonic()
     result = subprocess.run([sys.executable, '-m', 'cog_id_ros.demos.fig4', '--output',
                              str(tmp_path / 'fig4.png')], cwd=REPO, env=ros_env,
@@ -127,8 +131,11 @@ def test_fig4_refuses_a_domain_where_its_nodes_names_are_taken(other_node, ros_e
     match = refusal_of(result.stderr)
     # the node's name, its publisher of joint_effort, or what the demo's own node saw
     assert re.search(r'/fig4_a/(cog_id_node|joint_effort)', match[1]), match[1]
-    assert match[2] == "their data would mix with this run's"
-    assert not (tmp_path / 'fig4_a.csv').exists()             # refused before playing
+    if match[2] == "their data would mix with this run's":
+        assert not (tmp_path / 'fig4_a.csv').exists()         # refused before playing
+    else:
+        assert match[2] == 'the efforts above are mixed with theirs', match[2]
+        assert (tmp_path / 'fig4_a.csv').exists()             # found after the runs
     assert time.monotonic() - started < 60
 
 

@@ -72,6 +72,19 @@ def trajectory_processes(pid):
     return found
 
 
+def children_states(pid):
+    """(pid, state letter, command line) of each child of ``pid``: what a failure shows."""
+    out = subprocess.run(['pgrep', '-P', str(pid)], capture_output=True, text=True).stdout
+    found = []
+    for child in map(int, out.split()):
+        try:
+            with open(f'/proc/{child}/cmdline', 'rb') as f:
+                found.append((child, process_state(child), f.read()[:200]))
+        except OSError:
+            pass
+    return found
+
+
 def process_state(pid):
     """The state letter of process ``pid`` (R, S, T stopped, Z, ...), '' once it is gone."""
     try:
@@ -423,8 +436,14 @@ def test_a_long_trajectory_to_a_stopped_process_is_answered_within_its_bound(ros
             proc.output
         assert wait_until(lambda: gone(pids), 10), 'the stopped process lives on'
     q = np.full((3, 1), 1.4)
+    answered = len(probe.effort_trajectories)
     probe.trajectories.publish(make_trajectory(['joint3'], q, q * 0, q * 0))
-    assert wait_until(lambda: len(probe.effort_trajectories) == 2, timeout=90), proc.output
+    # (once in a CI run beside a CPU hog no answer came within 90 s and the node said
+    # nothing; not reproduced in 14 runs under load since: the failure says what the
+    # node's processes and counters were)
+    assert wait_until(lambda: len(probe.effort_trajectories) > answered, timeout=90), (
+        proc.output, answered, len(probe.effort_trajectories), children_states(proc.proc.pid),
+        [values(status) for _, status in probe.diagnostics[-1:]])
     assert proc.stop() == 0, proc.output
 
 
