@@ -5,6 +5,7 @@ says what is wrong with a :class:`Rejected` that carries a short ``reason`` (the
 node counts in diagnostics) and a sentence for the log.
 """
 import math
+import re
 import struct
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -389,8 +390,12 @@ MEASURED_ADVICE = ('; a measured pose that far from the last one is a jump of th
                    '(or max_measurement_step is too large)')
 
 
+#: "setpoint(s)" as a word (not in a parameter name: mechanism.setpoint_tolerance)
+_SETPOINT_WORD = re.compile(r'(?<![\w.])setpoint(s?)(?!\w)')
+
+
 def of_measured_state(text: str) -> str:
     """A core message about the sample it solved ("cannot reach the setpoint ...", "the
     loops cannot be closed at this setpoint"), said of the measured state it was."""
     text = text.replace(UNREACHABLE_ADVICE, MEASURED_ADVICE)
-    return text.replace('setpoints', 'measured states').replace('setpoint', 'measured state')
+    return _SETPOINT_WORD.sub(r'measured state\1', text)

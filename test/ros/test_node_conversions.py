@@ -41,6 +41,7 @@ def test_a_wrapped_trajectory_is_unwrapped_before_it_is_differentiated():
     the step is refused as 'jump'."""
     import math
 
+    from conftest import REPO
     import numpy as np
     from rclpy.serialization import deserialize_message, serialize_message
     from test_node import make_trajectory
@@ -49,7 +50,7 @@ def test_a_wrapped_trajectory_is_unwrapped_before_it_is_differentiated():
     import cog_id_ros
     from cog_id_ros.ros.conversions import JointSelector, Rejected, solve_trajectory_message
 
-    mech = cog_id_ros.Mechanism.from_params_file('config/paper_four_bar_a.yaml')
+    mech = cog_id_ros.Mechanism.from_params_file(f'{REPO}/config/paper_four_bar_a.yaml')
     t = np.arange(201) * 0.01
     th = 1.4 + 0.01 * t
     reported = np.where(t > 1.0, th - 2 * math.pi, th)
@@ -65,3 +66,26 @@ def test_a_wrapped_trajectory_is_unwrapped_before_it_is_differentiated():
         solve_trajectory_message(raw, solver, JointSelector(['joint3']), unwrap=[False],
                                  max_step=[1.0])
     assert info.value.reason == 'jump'
+
+
+def test_a_core_message_said_of_a_measured_state():
+    """Issue 22, adversarial check: a measured state the solver could not follow was logged
+    with the core's setpoint advice ("Send setpoints closer together"). Said of the measured
+    state now, parameter names untouched; the advice replaced is the core's own text."""
+    from conftest import REPO
+
+    import cog_id_ros
+    from cog_id_ros.core.sample_solve import unreachable
+    from cog_id_ros.ros.conversions import MEASURED_ADVICE, UNREACHABLE_ADVICE, of_measured_state
+
+    mech = cog_id_ros.Mechanism.from_params_file(f'{REPO}/config/paper_four_bar_a.yaml')
+    start = (list(mech.assembled_positions), [0.0] * len(mech.joints))
+    core = str(unreachable(mech, start, [2.0], None, 'the loops stop closing'))
+    assert UNREACHABLE_ADVICE in core
+    said = of_measured_state(core)
+    assert said.startswith('cannot reach the measured state [2') and MEASURED_ADVICE in said
+    assert 'setpoint' not in said
+    inconsistent = ('the redundant setpoint disagrees with the loop closure by 0.1 (rad or m), '
+                    'more than mechanism.setpoint_tolerance 0.001')
+    assert of_measured_state(inconsistent) == inconsistent.replace(
+        'redundant setpoint', 'redundant measured state')
