@@ -29,7 +29,9 @@ class ToolError(Exception):
         super().__init__(message)
 
 
-def one_line(exc):
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (whitespace runs become one space): the tools'
+    and the nodes' errors alike."""
     return ' '.join(str(exc).split())
 
 

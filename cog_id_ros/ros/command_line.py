@@ -18,11 +18,7 @@ import yaml
 
 from ..core import MechanismConfigError
 from ..description import params_file
-
-
-def one_line(exc: BaseException) -> str:
-    """The message of ``exc`` on one line (whitespace runs become one space)."""
-    return ' '.join(str(exc).split())
+from ..offline.console import one_line
 
 
 def node_arguments(args: Sequence[str] | None) -> list[str]:
