@@ -62,6 +62,22 @@ def _entry_matches(entry, node_name):
     return None
 
 
+def other_nodes(path, node_name):
+    """The entries of the parameter file ``path`` when none of them is for the node
+    ``node_name`` (nor ``/**``): the nodes it gives parameters to instead; [] when one is
+    (or the file cannot be read: that is said elsewhere)."""
+    try:
+        document = read_document(path, duplicate_keys=True)
+    except MechanismConfigError:
+        return []
+    if not isinstance(document, dict):
+        return []
+    entries = [str(entry) for entry in document]
+    if any(_entry_matches(entry, node_name) for entry in entries):
+        return []
+    return entries
+
+
 def load_params_file(path, node_name=DEFAULT_NODE_NAME):
     """Dotted-name dict of the parameters a node called ``node_name`` gets from ``path``."""
     if not isinstance(node_name, str):

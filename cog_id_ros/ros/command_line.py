@@ -89,6 +89,22 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
     return None
 
 
+def other_nodes_hint(argv: Sequence[str], node: str) -> str:
+    """'; <file> gives parameters to <entries>, not to this node ...' for each
+    ``--params-file`` none of whose entries is for the node ``node`` (a file written for
+    another node name: rcl gives this node none of it, and the node would only say which
+    parameter it missed first); '' when every file has an entry for it."""
+    files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
+    hints = []
+    for path in files:
+        entries = params_file.other_nodes(path, node)
+        if entries:
+            hints.append(f"; {path} gives parameters to {', '.join(entries)}, not to this node "
+                         f"('{node}'): name its entry {node}: or /**:, or start the node with "
+                         f"-r __node:={entries[0].strip('/').split('/')[-1]}")
+    return ''.join(hints)
+
+
 def urdf_base_dir(command_line: Sequence[str] | None, node_name: str,
                   parameter: str = 'mechanism.urdf_file') -> str | None:
     """The directory a relative ``mechanism.urdf_file`` (or another file parameter,

@@ -21,7 +21,15 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
 from ..core import MechanismConfigError
 from . import stop_signals
-from .command_line import StderrHeld, node_arguments, one_line, params_file_problem, rcl_message
+from .command_line import (
+    StderrHeld,
+    node_arguments,
+    node_name,
+    one_line,
+    other_nodes_hint,
+    params_file_problem,
+    rcl_message,
+)
 
 #: Python's thread switch interval in the node: the longest a thread holding the GIL keeps
 #: the setpoint thread waiting (Python's default is 5 ms)
@@ -68,7 +76,8 @@ def run(name: str, build: Callable[..., Any], args: list[str] | None = None) -> 
         if stop.hand_over() is None:   # no stop asked for during start-up
             _spin(executor, node, stop)
     except PARAMETER_ERRORS as exc:
-        return cannot_start(name, one_line(exc))
+        argv = node_arguments(args)
+        return cannot_start(name, one_line(exc) + other_nodes_hint(argv, node_name(argv, name)))
     except (ExternalShutdownException, stop_signals.StopRequested):
         pass   # Ctrl-C or SIGTERM: rclpy's signal handler has shut the context down, or
         # start-up was interrupted while it loaded the mechanism or compiled its kernels

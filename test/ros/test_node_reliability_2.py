@@ -555,6 +555,36 @@ def test_no_mechanism_parameters_says_how_to_give_them(ros_env):
             assert line.endswith(got), line
 
 
+def test_a_params_file_for_another_node_name_says_so(ros_env, tmp_path):
+    """Issue 22, left open from an adversarial check: a parameter file whose entry names
+    another node (`my_robot:` instead of `cog_id_node:` or `/**:`) gives the node nothing,
+    and it said only "mechanism.links: missing". Now the line says whose parameters the
+    file holds and the two ways out; the remap it suggests starts the node (both nodes:
+    cog_sim_node shares the start-up)."""
+    repo = str(pathlib.Path(__file__).resolve().parents[2])
+    text = pathlib.Path(CONFIG_A).read_text()
+    assert '\n/**:\n' in text
+    other = tmp_path / 'other_name.yaml'
+    other.write_text(text.replace('\n/**:\n', '\nmy_robot:\n'))
+    for module, node in (('cog_id_ros.node', 'cog_id_node'),
+                         ('cog_id_ros.ros.sim_main', 'cog_sim_node')):
+        result = subprocess.run([sys.executable, '-m', module, '--ros-args', '--params-file',
+                                 str(other)], env=ros_env, cwd=repo, stdin=subprocess.DEVNULL,
+                                capture_output=True, text=True, timeout=60)
+        assert result.returncode == 2, result.stderr
+        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        assert lines == [f'{node}: cannot start: mechanism.links: missing; {other} gives '
+                         f"parameters to my_robot, not to this node ('{node}'): name its entry "
+                         f'{node}: or /**:, or start the node with -r __node:=my_robot'], lines
+    # a file with an entry for the node (or /**) says nothing of the kind
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text(text.replace('links: [link1, link2, link3]', 'linkz: []'))
+    result = subprocess.run([sys.executable, '-m', 'cog_id_ros.node', '--ros-args',
+                             '--params-file', str(broken)], env=ros_env, cwd=repo,
+                            stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and 'gives parameters to' not in result.stderr, result.stderr
+
+
 def test_a_change_of_an_unknown_parameter_is_refused_naming_it(ros_process, probe_for):
     """Reliability 2, adversarial check: SetParameters on a name the node does not have
     was refused with rclpy's "Invalid access to undeclared parameter(s): []", and one named
