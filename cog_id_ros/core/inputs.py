@@ -144,8 +144,8 @@ def check_values(mechanism: 'Mechanism', wrapping: Sequence[int], q: FloatArray,
             if bad.size:
                 joint = mechanism.active_joints[bad[0]]
                 errors[int(i)] = SetpointError(
-                    f'{where}{label} of {joint} is {array[i, bad[0]]}: setpoints must be '
-                    f'finite', sample=int(i), reason='non_finite')
+                    f'{where}{label} of {joint} is {array[i, bad[0]]}: must be finite',
+                    sample=int(i), reason='non_finite')
                 break
         else:
             a = next((a for a in wrapping if not abs(q[i, a]) <= MAX_ANGLE), None)
@@ -154,12 +154,12 @@ def check_values(mechanism: 'Mechanism', wrapping: Sequence[int], q: FloatArray,
                                  if not x[1] <= q[i, x[0]] <= x[2])
                 name = mechanism.active_joints[a]
                 errors[int(i)] = SetpointError(
-                    f'{where}q of {name} is {q[i, a]:.6g}, outside its position limits '
+                    f'{where}{labels[0]} of {name} is {q[i, a]:.6g}, outside its position limits '
                     f'[{lo:.6g}, {hi:.6g}] (joints.{name}.lower and upper, or the URDF '
                     f'<limit>)', sample=int(i), reason='limit')
                 continue
             errors[int(i)] = SetpointError(
-                f'{where}q of {mechanism.active_joints[a]} is {q[i, a]:.6g} rad, beyond '
+                f'{where}{labels[0]} of {mechanism.active_joints[a]} is {q[i, a]:.6g} rad, beyond '
                 f'+-{MAX_ANGLE:g} rad (there a float no longer holds an angle to better than '
                 f'1e-7 rad): wrap or offset the angle', sample=int(i), reason='out_of_range')
     return finite & in_range, errors

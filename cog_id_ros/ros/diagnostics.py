@@ -32,6 +32,9 @@ DIAGNOSTIC_KEYS = {
     'backend': "who computes the kernels: native, python or reference (parameter 'backend')",
     'setpoints_accepted': 'setpoints served since start',
     'setpoints_rejected': 'setpoints rejected since start (sum of rejected.<kind>)',
+    'setpoint_publishers': "publishers of joint_setpoint matched to the node's subscription, "
+                           'as the node sees them (a publisher may see the node first: wait '
+                           'for this before the first setpoint, or it may be lost unseen)',
     'setpoints_lost': 'setpoints the single publisher of joint_setpoint sent that never reached '
                       'the node (gaps in its sequence numbers, e.g. a full subscription queue)',
     'stamp_restarts': 'times the estimator restarted after max_stamp_rejections stamp rejections',
@@ -66,6 +69,8 @@ FEEDBACK_DIAGNOSTIC_KEYS = {
     'measurements_accepted': 'measured states commanded from since start',
     'measurements_rejected': 'measured states rejected since start, never commanded from '
                              '(sum of measurements_rejected.<kind>)',
+    'measured_state_publishers': 'publishers of measured_joint_states matched to the '
+                                 "node's subscription, as the node sees them",
     'measurement_age': 's since the last accepted measured state was received',
     'tracking_error_max': 'largest |q_d - q_m| of any active joint over the last period, rad '
                           'or m',
@@ -175,6 +180,8 @@ class Counts:
                                            'timeouts': 0, 'internal_errors': 0,
                                            'setpoints_lost': 0, 'stamp_restarts': 0,
                                            'setpoints_unstamped': 0})
+        #: publishers matched to the node's subscriptions, from their side: topic -> count
+        self.matched = {'joint_setpoint': 0, 'measured_joint_states': 0}
         self.rejected = collections.Counter(dict.fromkeys(REASONS, 0))
         self.trajectory_rejected = collections.Counter(
             dict.fromkeys((*REASONS, *TRAJECTORY_REASONS), 0))
@@ -326,6 +333,7 @@ class Report:
                 ('measurements_rejected', sum(counts.measurement_rejected.values())),
                 *((f'measurements_rejected.{reason}', count)
                   for reason, count in counts.measurement_rejected.items()),
+                ('measured_state_publishers', counts.matched['measured_joint_states']),
                 ('measurement_age', '' if age is None else f'{age:.4f}'),
                 *((f'tracking_error.{joint}', f'{e:.6g}')
                   for joint, e in zip(node.config.active_joints, errors)),
@@ -372,7 +380,8 @@ class Report:
     def _counted(self) -> list[tuple[str, Any]]:
         counts = self.node.counts
         c = counts.totals
-        return [('setpoints_accepted', c['accepted']),
+        return [('setpoint_publishers', counts.matched['joint_setpoint']),
+                ('setpoints_accepted', c['accepted']),
                 ('setpoints_rejected', sum(counts.rejected.values())),
                 *((f'rejected.{reason}', count) for reason, count in counts.rejected.items()),
                 ('setpoints_lost', c['setpoints_lost']),

@@ -24,7 +24,7 @@ import time
 from typing import Any, Callable, ContextManager, Sequence, cast
 
 import numpy as np
-from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -178,18 +178,29 @@ class CogIdNode(ReadOnlyNode):
         self.setpoint_loop = SetpointLoop(
             self, JointState, TOPICS['joint_setpoint'].name, self.serve_setpoint,
             control_qos(), lock=self.lock, on_error=self._serve_failed, with_info=True,
-            qos_overriding_options=qos_options())
+            qos_overriding_options=qos_options(), event_callbacks=self._matched('joint_setpoint'))
         # feedback modes: the measured states, served like setpoints by a thread of their own
         self.measurement_loop = SetpointLoop(
             self, JointState, FEEDBACK_TOPICS['measured_joint_states'].name,
             self.serve_measurement, control_qos(), lock=self.lock,
             on_error=self._measurement_failed, with_info=True,
-            qos_overriding_options=qos_options()) if self.measurements is not None else None
+            qos_overriding_options=qos_options(),
+            event_callbacks=self._matched('measured_joint_states')) \
+            if self.measurements is not None else None
         # taken serialized: the executor never deserialises a long trajectory (a C call
         # that holds the GIL for seconds); the trajectory process does
         self.trajectory_sub = self.create_subscription(
             JointTrajectory, TOPICS['joint_trajectory'].name, self.on_trajectory, control_qos(),
             qos_overriding_options=qos_options(), raw=True)
+
+    def _matched(self, topic: str) -> SubscriptionEventCallbacks:
+        """The event callbacks of a subscription to ``topic``: rclpy's defaults (an
+        incompatible publisher is logged), and its matched publishers counted for
+        /diagnostics (the node's side of the match: a publisher can see the node before the
+        node sees it, and what it sends meanwhile is lost without a trace)."""
+        def matched(status: Any) -> None:
+            self.counts.matched[topic] = status.current_count
+        return SubscriptionEventCallbacks(matched=matched)
 
     def _trajectory_backend(self) -> str:
         """The backend of the trajectory process: the node's solver's, except that compiled

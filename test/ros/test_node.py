@@ -82,10 +82,21 @@ class Probe:
         self.executor.shutdown()
         self.node.destroy_node()
 
-    def connected(self):
+    def connected(self, node_sees=None):
+        """Both sides matched: this probe's (the node's subscription and publisher), and
+        the node's: its /diagnostics count a setpoint publisher (``node_sees()`` instead, for
+        a node in this process that is not spun). A publisher sees the subscription first;
+        a setpoint sent before the node saw the publisher is lost without a trace (a loaded
+        CI run lost a test's first setpoint so)."""
         effort_topic = f'{self.namespace}/joint_effort'
+        created = time.monotonic()
+
+        def reported():
+            return any(t > created and int(values(status).get('setpoint_publishers', 0)) > 0
+                       for t, status in list(self.diagnostics))
         return wait_until(lambda: self.setpoints.get_subscription_count() > 0
-                          and self.node.count_publishers(effort_topic) > 0)
+                          and self.node.count_publishers(effort_topic) > 0) and \
+            wait_until(node_sees or reported)
 
     def send(self, stamp_ns, names, positions, velocities=(), efforts=()):
         msg = JointState()

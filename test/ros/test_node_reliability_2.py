@@ -314,7 +314,7 @@ def test_a_setpoint_thread_ended_by_the_shutdown_is_not_a_stopped_thread(rclpy_c
         node = in_node(context, '/shutdown_end')
         node.start()
         probe = Probe(rclpy_context, '/shutdown_end', 'probe2_shutdown_end')
-        assert probe.connected()
+        assert probe.connected(lambda: node.counts.matched['joint_setpoint'] > 0)
         base = time.time_ns()
         probe.send(base, ['joint3'], [1.4])
         probe.wait_effort(base)
@@ -553,6 +553,20 @@ def test_no_mechanism_parameters_says_how_to_give_them(ros_env):
         else:
             assert 'arguments before --ros-args are not ROS arguments' in line, line
             assert line.endswith(got), line
+
+
+def test_setpoint_publishers_counts_what_the_node_has_matched(ros_process, probe_for):
+    """A loaded CI run lost a test's first setpoint: the probe saw the node's subscription
+    matched, the node had not matched the probe yet. /diagnostics now says what the node
+    sees (`setpoint_publishers`, its subscription's matched events): 1 once the probe's
+    publisher is matched (probe_for waits for it), 0 again once it is gone."""
+    start(ros_process, '/matched', '-p', 'diagnostics_period:=0.1')
+    probe = probe_for('/matched')
+    kv = wait_values(probe, lambda kv: True)
+    assert kv['setpoint_publishers'] == '1', kv
+    probe.node.destroy_publisher(probe.setpoints)
+    kv = wait_values(probe, lambda kv: kv['setpoint_publishers'] == '0')
+    assert kv['setpoint_publishers'] == '0', kv
 
 
 def test_a_params_file_for_another_node_name_says_so(ros_env, tmp_path):

@@ -10,7 +10,6 @@ joint_states by the mechanism's joint names; the effort limit defaults to the UR
 ``<limit effort>`` and the node's parameter wins over it.
 """
 import os
-import threading
 import time
 
 import numpy as np
@@ -20,13 +19,11 @@ import yaml
 rclpy = pytest.importorskip('rclpy')
 
 from conftest import REPO, wait_until  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
+from test_node import Probe as NodeProbe  # noqa: E402
 
 import cog_id_ros  # noqa: E402
 from cog_id_ros.ros.command_line import urdf_base_dir  # noqa: E402
-from cog_id_ros.ros.node import control_qos  # noqa: E402
 from cog_id_ros.ros.player import RECORDER_QOS  # noqa: E402
 
 NS = 1_000_000_000
@@ -40,31 +37,14 @@ FIVE_BAR = os.path.join('config', 'five_bar_robot.yaml')
 CRANK = [(1.5708, 0.0), (1.62, 2.0), (1.70, -1.5), (1.80, 4.0), (1.75, 0.5)]
 
 
-class Probe:
+class Probe(NodeProbe):
+    """test_node's probe (both sides matched before anything is sent), joint_states too."""
+
     def __init__(self, context, namespace):
-        self.namespace = namespace
-        self.node = rclpy.create_node('urdf_probe' + namespace.replace('/', '_'),
-                                      namespace=namespace, context=context)
-        self.setpoints = self.node.create_publisher(JointState, 'joint_setpoint', control_qos())
-        self.commands, self.efforts, self.states = [], [], []
-        self.node.create_subscription(Float64MultiArray, 'effort_command', self.commands.append,
-                                      RECORDER_QOS)
-        self.node.create_subscription(JointState, 'joint_effort', self.efforts.append,
-                                      RECORDER_QOS)
+        super().__init__(context, namespace, 'urdf_probe' + namespace.replace('/', '_'))
+        self.states = []
         self.node.create_subscription(JointState, 'joint_states', self.states.append,
                                       RECORDER_QOS)
-        self.executor = SingleThreadedExecutor(context=context)
-        self.executor.add_node(self.node)
-        threading.Thread(target=self.executor.spin, daemon=True).start()
-
-    def close(self):
-        self.executor.shutdown()
-        self.node.destroy_node()
-
-    def connected(self):
-        topic = f'{self.namespace}/joint_effort'
-        return wait_until(lambda: self.setpoints.get_subscription_count() > 0
-                          and self.node.count_publishers(topic) > 0)
 
     def play(self, joint):
         start = time.time_ns()
