@@ -441,9 +441,13 @@ def test_a_long_trajectory_to_a_stopped_process_is_answered_within_its_bound(ros
     # (once in a CI run beside a CPU hog no answer came within 90 s and the node said
     # nothing; not reproduced in 14 runs under load since: the failure says what the
     # node's processes and counters were)
-    assert wait_until(lambda: len(probe.effort_trajectories) > answered, timeout=90), (
-        proc.output, answered, len(probe.effort_trajectories), children_states(proc.proc.pid),
-        [values(status) for _, status in probe.diagnostics[-1:]])
+    if not wait_until(lambda: len(probe.effort_trajectories) > answered, timeout=90):
+        # printed in full (pytest shortens an assertion's message)
+        print('node output:', proc.output, 'answered before:', answered, 'now:',
+              len(probe.effort_trajectories), 'children:', children_states(proc.proc.pid),
+              'diagnostics:', [values(status) for _, status in probe.diagnostics[-1:]],
+              sep='\n', file=sys.stderr)
+        pytest.fail('the trajectory after the replaced process got no answer in 90 s')
     assert proc.stop() == 0, proc.output
 
 
