@@ -105,11 +105,13 @@ class NodeProcess:
             self.lines.append(line.rstrip())
 
     def wait_started(self, timeout=30.0):
-        """The node's first log line (its mechanism) once it is up; raises if it is not."""
+        """The node's line naming its mechanism once it is up (other lines may come first:
+        rcl's warning that ROS_LOCALHOST_ONLY is deprecated); raises if it is not."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            if self.lines and "mechanism '" in self.lines[0]:
-                return self.lines[0]
+            started = next((line for line in list(self.lines) if "mechanism '" in line), None)
+            if started is not None:
+                return started
             if self.proc.poll() is not None:
                 self._reader.join(timeout=2)
                 break

@@ -214,3 +214,19 @@ def test_two_fig4_runs_in_one_domain_never_mix_their_data(ros_env, tmp_path):
             sent, answered, recorded = int(sent), int(answered), int(recorded)
             assert sent == 2001 and answered <= sent and recorded <= answered, everything
     assert np.all(np.isin(codes, (0, 2, 3)))
+
+
+def test_a_node_that_logs_before_its_mechanism_line_counts_as_started(ros_env):
+    """Adversarial check after issue 22: with ROS_LOCALHOST_ONLY=1 rcl logs that the variable
+    is deprecated before the node's first line, and the demo, which read only the first
+    line, said after 30 s that the node "did not start" (exit 1). It now looks for the
+    mechanism line among the node's lines."""
+    env = dict(ros_env, ROS_LOCALHOST_ONLY='1')
+    env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)
+    node = fig4.NodeProcess(f'{REPO}/config/paper_four_bar_a.yaml', '/fig4_localhost', env)
+    try:
+        line = node.wait_started(timeout=60)
+        assert "mechanism 'paper_four_bar_a'" in line, node.lines
+        assert "mechanism '" not in node.lines[0], 'rcl logged nothing first: test too weak'
+    finally:
+        assert node.stop() == 0, node.lines
