@@ -20,6 +20,7 @@ cog_id_node and the API accept the same files (the node checks its ``--params-fi
 only MechanismConfigError comes out of here, naming the parameter or ``params_file``, in
 time proportional to the size of the file.
 """
+import fnmatch
 import os
 import re
 import stat
@@ -62,19 +63,25 @@ def _entry_matches(entry, node_name):
     return None
 
 
-def other_nodes(path, node_name):
-    """The entries of the parameter file ``path`` when none of them is for the node
-    ``node_name`` (nor ``/**``): the nodes it gives parameters to instead; [] when one is
-    (or the file cannot be read: that is said elsewhere)."""
+def other_nodes(path, full_name):
+    """The entries of the parameter file ``path`` when rcl gives the node of full name
+    ``full_name`` ('/ns/name') none of them: the nodes it gives parameters to instead; []
+    when one is for it (or the file cannot be read: that is said elsewhere); None when
+    the file holds no node entries at all. rcl's rule: an entry is the node's full name
+    (a leading '/' implied), '/**', or a pattern whose '*' matches any text ('/**/name'
+    also at the root)."""
     try:
         document = read_document(path, duplicate_keys=True)
     except MechanismConfigError:
         return []
     if not isinstance(document, dict):
-        return []
+        return None
     entries = [str(entry) for entry in document]
-    if any(_entry_matches(entry, node_name) for entry in entries):
-        return []
+    for entry in entries:
+        pattern = '/' + entry.lstrip('/')
+        if pattern == full_name or fnmatch.fnmatchcase(full_name, pattern) or (
+                pattern.startswith('/**/') and fnmatch.fnmatchcase(full_name, pattern[3:])):
+            return []
     return entries
 
 

@@ -91,18 +91,63 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
 
 def other_nodes_hint(argv: Sequence[str], node: str) -> str:
     """'; <file> gives parameters to <entries>, not to this node ...' for each
-    ``--params-file`` none of whose entries is for the node ``node`` (a file written for
-    another node name: rcl gives this node none of it, and the node would only say which
-    parameter it missed first); '' when every file has an entry for it."""
+    ``--params-file`` none of whose entries rcl gives the node (``node``: its default
+    name; the remaps of ``argv`` give its full name): a file written for another node name
+    or namespace, which the node would only report as the first parameter it missed.
+    '' when every file has an entry for it."""
+    namespace, name = _remapped(argv, '__ns', '/'), _remapped(argv, '__node', node)
+    full = f"{namespace.rstrip('/')}/{name}"
     files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
     hints = []
     for path in files:
-        entries = params_file.other_nodes(path, node)
-        if entries:
+        entries = params_file.other_nodes(path, full)
+        if entries is None:
+            hints.append(f'; {path} holds no node entries: put the parameters under /**: and '
+                         'ros__parameters:')
+        elif entries:
+            way = _remaps_to(entries[0], namespace, node)
+            own = full.lstrip('/') if namespace == '/' else full
             hints.append(f"; {path} gives parameters to {', '.join(entries)}, not to this node "
-                         f"('{node}'): name its entry {node}: or /**:, or start the node with "
-                         f"-r __node:={entries[0].strip('/').split('/')[-1]}")
+                         f"('{full}'): name its entry {own}: or /**:"
+                         f"{', or ' + way if way else ''}")
     return ''.join(hints)
+
+
+def _remaps_to(entry: str, namespace: str, default: str) -> str:
+    """How to start the node (now in ``namespace``; ``default``: its name without remaps)
+    as the node of the params-file ``entry``: 'start it as /arm/my_robot (-r __ns:=/arm -r
+    __node:=my_robot)'; '' for a pattern other than /**/<name> or <ns>/*."""
+    path = '/' + entry.strip('/')
+    ns: str | None
+    if path.startswith('/**/'):
+        ns, node = None, path[4:]
+    else:
+        ns, node = path.rsplit('/', 1)
+        ns = ns or '/'
+    if '*' in node and node != '*' or ns is not None and '*' in ns:
+        return ''
+    rules = [f'-r __ns:={ns}'] if ns not in (None, '/') else []
+    rules += [f'-r __node:={node}'] if node not in ('*', default) else []
+    said = ' '.join(rules)
+    if ns == '/' and namespace != '/':
+        said = f'{said}, no __ns remap' if said else 'no __ns remap'
+    what = f'in {ns}' if node == '*' else node if ns is None else path
+    return f"start it as {what} ({said or 'no remap'}) instead"
+
+
+def _remapped(argv: Sequence[str], which: str, default: str) -> str:
+    """What the node's ``which`` ('__node' or '__ns') is after the ``-r`` rules of ``argv``:
+    the first rule for it counts (rcl's), a rule ``<node>:__node:=...`` only for the node
+    whose default name is ``default`` (for '__node')."""
+    aliases = ('__node', '__name') if which == '__node' else ('__ns',)
+    for arg, value in zip(argv, argv[1:]):
+        if arg not in ('-r', '--remap') or ':=' not in value:
+            continue
+        key, target = value.split(':=', 1)
+        only, _, key = key.rpartition(':')
+        if key in aliases and (not only or which == '__ns' or only == default):
+            return target
+    return default
 
 
 def urdf_base_dir(command_line: Sequence[str] | None, node_name: str,
@@ -129,13 +174,9 @@ def urdf_base_dir(command_line: Sequence[str] | None, node_name: str,
 
 
 def node_name(command_line: Sequence[str] | None, default: str) -> str:
-    """The node's name: ``default``, or the last ``-r __node:=NAME`` (``__name``) rule."""
-    name = default
-    args = list(command_line or ())
-    for arg, value in zip(args, args[1:]):
-        if arg in ('-r', '--remap') and value.split(':=', 1)[0] in ('__node', '__name'):
-            name = value.split(':=', 1)[1]
-    return name
+    """The node's name: ``default``, or what the first ``-r __node:=NAME`` (``__name``,
+    ``<default>:__node``) rule makes it (rcl's rule: the first match counts)."""
+    return _remapped(list(command_line or ()), '__node', default)
 
 
 def given_value(command_line: Sequence[str] | None, node_name: str, name: str,

@@ -575,28 +575,63 @@ def test_setpoint_publishers_counts_what_the_node_has_matched(ros_process, probe
     assert kv['setpoint_publishers'] == '0', kv
 
 
-def test_a_params_file_for_another_node_name_says_so(ros_env, tmp_path):
+def test_a_params_file_for_another_node_name_says_so(ros_env, ros_process, tmp_path):
     """Issue 22, left open from an adversarial check: a parameter file whose entry names
-    another node (`my_robot:` instead of `cog_id_node:` or `/**:`) gives the node nothing,
-    and it said only "mechanism.links: missing". Now the line says whose parameters the
-    file holds and the two ways out; the remap it suggests starts the node (both nodes:
+    another node (`my_robot:` instead of `cog_id_node:` or `/**:`), or another namespace,
+    gives the node nothing, and it said only "mechanism.links: missing". Now the line says
+    whose parameters the file holds (by rcl's rule: the full name, the first remap rule
+    counts) and the ways out; the remaps it suggests start the node (both nodes:
     cog_sim_node shares the start-up)."""
     repo = str(pathlib.Path(__file__).resolve().parents[2])
     text = pathlib.Path(CONFIG_A).read_text()
     assert '\n/**:\n' in text
-    other = tmp_path / 'other_name.yaml'
-    other.write_text(text.replace('\n/**:\n', '\nmy_robot:\n'))
-    for module, node in (('cog_id_ros.node', 'cog_id_node'),
-                         ('cog_id_ros.ros.sim_main', 'cog_sim_node')):
+
+    def refusal(module, entry, *remaps):
+        path = tmp_path / f"{entry.strip('/').replace('/', '_').replace('*', 'x')}.yaml"
+        path.write_text(text.replace('\n/**:\n', f'\n{entry}:\n'))
         result = subprocess.run([sys.executable, '-m', module, '--ros-args', '--params-file',
-                                 str(other)], env=ros_env, cwd=repo, stdin=subprocess.DEVNULL,
-                                capture_output=True, text=True, timeout=60)
+                                 str(path), *remaps], env=ros_env, cwd=repo,
+                                stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                                timeout=60)
         assert result.returncode == 2, result.stderr
         lines = [line for line in result.stderr.splitlines() if line.strip()]
-        assert lines == [f'{node}: cannot start: mechanism.links: missing; {other} gives '
-                         f"parameters to my_robot, not to this node ('{node}'): name its entry "
-                         f'{node}: or /**:, or start the node with -r __node:=my_robot'], lines
-    # a file with an entry for the node (or /**) says nothing of the kind
+        assert len(lines) == 1, lines
+        return path, lines[0].split(': cannot start: mechanism.links: missing; ', 1)
+
+    for module, node in (('cog_id_ros.node', 'cog_id_node'),
+                         ('cog_id_ros.ros.sim_main', 'cog_sim_node')):
+        path, said = refusal(module, 'my_robot')
+        assert said == [node, f"{path} gives parameters to my_robot, not to this node "
+                              f"('/{node}'): name its entry {node}: or /**:, or start it as "
+                              f'/my_robot (-r __node:=my_robot) instead'], said
+    cases = {  # entry, remaps -> the way out it suggests
+        ('my_robot', '-r', '__ns:=/arm'): "('/arm/cog_id_node'): name its entry "
+        '/arm/cog_id_node: or /**:, or start it as /my_robot (-r __node:=my_robot, no __ns '
+        'remap) instead',
+        ('/arm/cog_id_node',): "('/cog_id_node'): name its entry cog_id_node: or /**:, or "
+        'start it as /arm/cog_id_node (-r __ns:=/arm) instead',
+        ('/**/my_robot', '-r', '__node:=other', '-r', '__node:=later'): "('/other'): name its "
+        'entry other: or /**:, or start it as my_robot (-r __node:=my_robot) instead'}
+    for (entry, *remaps), end in cases.items():
+        _, said = refusal('cog_id_ros.node', entry, *remaps)
+        assert said[1].endswith(end), said
+    # the suggested remaps start the node
+    path, said = refusal('cog_id_ros.node', '/arm/my_robot')
+    assert said[1].endswith('start it as /arm/my_robot (-r __ns:=/arm -r __node:=my_robot) '
+                            'instead'), said
+    proc = ros_process([sys.executable, '-m', 'cog_id_ros.node', '--ros-args', '--params-file',
+                        str(path), '-r', '__ns:=/arm', '-r', '__node:=my_robot'])
+    assert proc.wait_for_output("mechanism '", timeout=60), proc.output
+    assert proc.stop() == 0, proc.output
+    # no node entries at all; and a file with an entry for the node says nothing of the kind
+    scalar = tmp_path / 'scalar.yaml'
+    scalar.write_text('hello world\n')
+    result = subprocess.run([sys.executable, '-m', 'cog_id_ros.node', '--ros-args',
+                             '--params-file', str(scalar)], env=ros_env, cwd=repo,
+                            stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and result.stderr.strip().endswith(
+        'holds no node entries: put the parameters under /**: and ros__parameters:'), \
+        result.stderr
     broken = tmp_path / 'broken.yaml'
     broken.write_text(text.replace('links: [link1, link2, link3]', 'linkz: []'))
     result = subprocess.run([sys.executable, '-m', 'cog_id_ros.node', '--ros-args',
