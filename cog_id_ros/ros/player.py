@@ -165,6 +165,7 @@ def play_recorded(player: Player, recorder: recording.Recorder, effort_topic: st
         stamps += player.play(times[1:], positions[1:], rest_v, start_ns=start + offset)
     result, received = recorder.settle(where or effort_topic, effort_topic, status, stamps,
                                        before)
+    result.setpoint_topic = player.publisher.topic_name
     return stamps, result, received
 
 

@@ -58,7 +58,8 @@ class Account:
     (matched by stamp); ``accepted``, ``rejected``, ``lost``: the node's counters over the
     run (None when no report of the node came, before or after). The properties below
     count with them only for a ``reported`` account (which mypy cannot tell: the
-    ``type: ignore[operator]`` comments).
+    ``type: ignore[operator]`` comments). ``setpoint_topic``: the node's setpoint topic
+    (fully qualified), which the advice on lost setpoints names.
     """
 
     where: str
@@ -67,6 +68,7 @@ class Account:
     accepted: int | None = None
     rejected: int | None = None
     lost: int | None = None
+    setpoint_topic: str = '/<namespace>/joint_setpoint'
 
     @property
     def reported(self) -> bool:
@@ -107,10 +109,12 @@ class Account:
         if self.lost > 0:  # type: ignore[operator]
             parts.append(f'node: {self.lost} setpoints lost before the node took them (its '
                          'joint_setpoint queue ran over; to keep them all, start the node '
-                         'with -p qos_overrides./<namespace>/joint_setpoint.subscription.'
-                         'depth:=<number of setpoints>)')
+                         f'with -p qos_overrides.{self.setpoint_topic}.subscription.depth:='
+                         f'{self.sent})')
         if self.rejected > 0:  # type: ignore[operator]
-            parts.append(f'node: {self.rejected} setpoints rejected (its log says why)')
+            parts.append(f'node: {self.rejected} setpoints rejected (its log says why; '
+                         "'stale': the node fell behind by more than max_setpoint_age, "
+                         'which a recording may raise)')
         if self.uncounted > 0:
             parts.append(f'node: {self.uncounted} setpoints never reached the node (not in its '
                          'counts: sent before its subscription matched, or lost at the end '

@@ -45,6 +45,10 @@ def test_account_places_every_missing_setpoint():
     assert not mixed.complete
     text = mixed.losses()
     assert 'node: 16 setpoints lost before the node took them' in text
+    # the way out, with this run's numbers (the topic is the player's, when it says it)
+    assert 'qos_overrides./<namespace>/joint_setpoint.subscription.depth:=2001' in text
+    mixed.setpoint_topic = '/arm/joint_setpoint'
+    assert 'qos_overrides./arm/joint_setpoint.subscription.depth:=2001' in mixed.losses()
     assert 'node: 3 setpoints rejected' in text
     assert 'node: 342 setpoints never reached the node' in text       # 2001 - 1640 - 3 - 16
     assert 'recorder: 343 efforts the node sent were not recorded' in text
