@@ -76,8 +76,7 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
     types), so the node and ``Mechanism.from_params_file`` refuse the same files with the
     same message. Keys written twice are left to rcl (the last one wins).
     """
-    files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
-    for path in files:
+    for path in _params_files(argv):
         try:
             params_file.check_rcl_values(params_file.read_document(path, duplicate_keys=True),
                                          path)
@@ -89,17 +88,21 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
     return None
 
 
+def _params_files(argv: Sequence[str]) -> list[str]:
+    """The ``--params-file`` arguments of ``argv``, in order."""
+    return [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
+
+
 def other_nodes_hint(argv: Sequence[str], node: str) -> str:
     """'; <file> gives parameters to <entries>, not to this node ...' for each
     ``--params-file`` none of whose entries rcl gives the node (``node``: its default
     name; the remaps of ``argv`` give its full name): a file written for another node name
     or namespace, which the node would only report as the first parameter it missed.
     '' when every file has an entry for it."""
-    namespace, name = _remapped(argv, '__ns', '/'), _remapped(argv, '__node', node)
+    namespace, name = _remapped(argv, '__ns', '/', node), _remapped(argv, '__node', node)
     full = f"{namespace.rstrip('/')}/{name}"
-    files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
     hints = []
-    for path in files:
+    for path in _params_files(argv):
         entries = params_file.other_nodes(path, full)
         if entries is None:
             hints.append(f'; {path} holds no node entries: put the parameters under /**: and '
@@ -135,17 +138,19 @@ def _remaps_to(entry: str, namespace: str, default: str) -> str:
     return f"start it as {what} ({said or 'no remap'}) instead"
 
 
-def _remapped(argv: Sequence[str], which: str, default: str) -> str:
-    """What the node's ``which`` ('__node' or '__ns') is after the ``-r`` rules of ``argv``:
-    the first rule for it counts (rcl's), a rule ``<node>:__node:=...`` only for the node
-    whose default name is ``default`` (for '__node')."""
+def _remapped(argv: Sequence[str], which: str, default: str, node: str | None = None) -> str:
+    """What the node's ``which`` ('__node' or '__ns') is after the ``-r`` rules of ``argv``
+    (``default`` without one): the first rule for it counts (rcl's); a rule
+    ``<name>:__node:=...`` applies only to the node whose default name is ``<name>``
+    (``node``; for '__node', ``default``)."""
+    node = default if node is None else node
     aliases = ('__node', '__name') if which == '__node' else ('__ns',)
     for arg, value in zip(argv, argv[1:]):
         if arg not in ('-r', '--remap') or ':=' not in value:
             continue
         key, target = value.split(':=', 1)
         only, _, key = key.rpartition(':')
-        if key in aliases and (not only or which == '__ns' or only == default):
+        if key in aliases and (not only or only == node):
             return target
     return default
 
