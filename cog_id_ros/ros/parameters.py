@@ -212,6 +212,17 @@ _CHECKS = {'number': _check_number, 'integer': _check_integer, 'choice': _check_
            'bool': _check_bool, 'per_joint': _check_per_joint, 'gains': _check_gains}
 
 
+def by_unit(values: dict[str, float], per: str = '') -> dict[str, Any]:
+    """``per_joint_default`` and ``default_text`` of a per-joint parameter whose default
+    follows the joint's unit: ``values`` unit ('rad', 'm') -> value; ``per``: '/s' for a
+    rate. (An active joint's type is a registered kind, with a unit.)"""
+    def default(joint_type: str) -> float:
+        return values[joints.kind(joint_type).unit]  # type: ignore[union-attr, index]
+    return {'per_joint_default': default,
+            'default_text': f'{values["rad"]!r} rad{per} revolute, '
+                            f'{values["m"]!r} m{per} prismatic'}
+
+
 def _table(*params: NodeParameter) -> dict[str, NodeParameter]:
     return {p.name: p for p in params}
 
@@ -267,10 +278,7 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'a stream is taken as received. false: positions are used as received'),
     NodeParameter(
         'max_setpoint_step', 'double[]', None, 'per_joint', what='step',
-        # (an active joint's type: a registered kind, with a unit)
-        per_joint_default=lambda joint_type: DEFAULT_MAX_STEP[joints.kind(joint_type).unit],  # type: ignore[union-attr, index]
-        default_text=f'{DEFAULT_MAX_STEP["rad"]!r} rad revolute, '
-                     f'{DEFAULT_MAX_STEP["m"]!r} m prismatic',
+        **by_unit(DEFAULT_MAX_STEP),
         description='rad or m: within a stream, a setpoint that moves an active joint farther '
                     'than this from the previous accepted one (after unwrapping) is rejected '
                     '(`jump`) and the estimator restarts, so the next setpoint starts a new '
@@ -364,20 +372,14 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'may stamp sim time) is rejected (`stale`)'),
     NodeParameter(
         'max_measurement_step', 'double[]', None, 'per_joint', what='step',
-        per_joint_default=lambda joint_type: MEASUREMENT_MAX_STEP[
-            joints.kind(joint_type).unit],  # type: ignore[union-attr, index]
-        default_text=f'{MEASUREMENT_MAX_STEP["rad"]!r} rad revolute, '
-                     f'{MEASUREMENT_MAX_STEP["m"]!r} m prismatic',
+        **by_unit(MEASUREMENT_MAX_STEP),
         description='feedback modes, rad or m: a measured state that moves an active joint '
                     'farther than this from the last accepted one (after unwrapping) is '
                     'rejected (`jump`), never commanded from; after `measurement_timeout` '
                     'without an accepted one the next starts a new stream (`.inf`: no check)'),
     NodeParameter(
         'max_measured_velocity', 'double[]', None, 'per_joint', what='velocity',
-        per_joint_default=lambda joint_type: MEASUREMENT_MAX_VELOCITY[
-            joints.kind(joint_type).unit],  # type: ignore[union-attr, index]
-        default_text=f'{MEASUREMENT_MAX_VELOCITY["rad"]!r} rad/s revolute, '
-                     f'{MEASUREMENT_MAX_VELOCITY["m"]!r} m/s prismatic',
+        **by_unit(MEASUREMENT_MAX_VELOCITY, '/s'),
         description='feedback modes, rad/s or m/s: a measured state whose velocity of an '
                     'active joint is larger than this in magnitude is rejected (`velocity`), '
                     'never commanded from: a corrupt velocity would reach the motors through '
