@@ -398,8 +398,10 @@ def _serve(conn: Any, topics: list[str], depth: int) -> None:
         pass                           # the parent is gone
     finally:
         # the executor thread ends before the node and the context go: a C++ thread still
-        # waiting in it at interpreter exit aborts ("terminate called ...")
-        executor.shutdown(timeout_sec=1.0)
-        spinner.join(timeout=5.0)
+        # waiting in it at interpreter exit aborts ("terminate called ..."), and a node
+        # destroyed under a spin still running prints a traceback (beside a CPU hog 1 s
+        # was once not enough: the bounds are for a loaded machine; quiet, milliseconds)
+        executor.shutdown(timeout_sec=10.0)
+        spinner.join(timeout=10.0)
         node.destroy_node()
         context.try_shutdown()

@@ -301,15 +301,24 @@ def test_managed_node_through_change_state(ros_process, rclpy_context):
     get = node.create_client(GetState, f'{namespace}/cog_id_node/get_state')
     lock = threading.Lock()
 
-    def state():
+    def answer(client, request, timeout, tries):
+        # a request sent before the service matched its client is lost unanswered (the
+        # first get_state beside a CPU hog once): asked again where asking twice is harmless
         with lock:
-            return get.call(GetState.Request(), timeout_sec=30).current_state.label
+            for _ in range(tries):
+                response = client.call(request, timeout_sec=timeout)
+                if response is not None:
+                    return response
+        raise AssertionError(f'no answer from {client.srv_name} ({tries} x {timeout} s)\n'
+                             f'{proc.output}')
 
-    def transition(tid):
+    def state():
+        return answer(get, GetState.Request(), 10, 6).current_state.label
+
+    def transition(tid, tries=1):
         request = ChangeState.Request()
         request.transition.id = tid
-        with lock:
-            return change.call(request, timeout_sec=120).success
+        return answer(change, request, 120 if tries == 1 else 10, tries).success
 
     def send_some(n=20):
         for k in range(n):
@@ -322,7 +331,9 @@ def test_managed_node_through_change_state(ros_process, rclpy_context):
         assert state() == 'unconfigured'
         # a transition not available here is refused, answered (rclpy raised: no answer,
         # and before the first configure the process ended)
-        assert not transition(Transition.TRANSITION_ACTIVATE) and state() == 'unconfigured'
+        # (refused whether asked once or again: the first request may ask twice)
+        assert not transition(Transition.TRANSITION_ACTIVATE, tries=6) \
+            and state() == 'unconfigured'
         send_some()
         assert transition(Transition.TRANSITION_CONFIGURE) and state() == 'inactive'
         assert not transition(Transition.TRANSITION_CONFIGURE) and state() == 'inactive'
