@@ -376,7 +376,14 @@ def _serve(conn: Any, topics: list[str], depth: int) -> None:
                                         reliability=ReliabilityPolicy.RELIABLE))
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
+    stop = threading.Event()
+
+    def spin() -> None:
+        # not executor.spin(): shutdown() from another thread destroys the executor's guard
+        # condition while spin may still trigger it (a traceback, beside a CPU hog)
+        while not stop.is_set() and context.ok():
+            executor.spin_once(timeout_sec=0.1)
+    spinner = threading.Thread(target=spin, daemon=True)
     spinner.start()
     conn.send('ready')
     try:
@@ -397,11 +404,10 @@ def _serve(conn: Any, topics: list[str], depth: int) -> None:
     except (EOFError, OSError):
         pass                           # the parent is gone
     finally:
-        # the executor thread ends before the node and the context go: a C++ thread still
-        # waiting in it at interpreter exit aborts ("terminate called ..."), and a node
-        # destroyed under a spin still running prints a traceback (beside a CPU hog 1 s
-        # was once not enough: the bounds are for a loaded machine; quiet, milliseconds)
-        executor.shutdown(timeout_sec=10.0)
+        # the spinning thread ends before the executor, the node and the context go: a C++
+        # thread still waiting in it at interpreter exit aborts ("terminate called ...")
+        stop.set()
         spinner.join(timeout=10.0)
+        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         context.try_shutdown()
