@@ -377,13 +377,7 @@ def _serve(conn: Any, topics: list[str], depth: int) -> None:
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     stop = threading.Event()
-
-    def spin() -> None:
-        # not executor.spin(): shutdown() from another thread destroys the executor's guard
-        # condition while spin may still trigger it (a traceback, beside a CPU hog)
-        while not stop.is_set() and context.ok():
-            executor.spin_once(timeout_sec=0.1)
-    spinner = threading.Thread(target=spin, daemon=True)
+    spinner = threading.Thread(target=_spin_until, args=(executor, stop, context), daemon=True)
     spinner.start()
     conn.send('ready')
     try:
@@ -411,3 +405,11 @@ def _serve(conn: Any, topics: list[str], depth: int) -> None:
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         context.try_shutdown()
+
+
+def _spin_until(executor: Any, stop: threading.Event, context: Any) -> None:
+    """Spin ``executor`` until ``stop`` is set (or the context is shut down). Not
+    executor.spin(): shutdown() from another thread destroys the executor's guard condition
+    while spin may still trigger it (a traceback, beside a CPU hog)."""
+    while not stop.is_set() and context.ok():
+        executor.spin_once(timeout_sec=0.1)
