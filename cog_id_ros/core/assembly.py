@@ -1,18 +1,33 @@
 """Assembly at load: the mechanism's loops closed near ``initial_positions``, what closing
 them moved, and which loops to check when they do not close.
 
-The loops are closed with the actuators (and the locked joints, idle_spins.py) held at
-their initial positions (Gauss-Newton on the closure equations, closure.assemble); failing
-that (e.g. rounded redundant initial positions), with every joint but the locked ones
-free, but a move of an actuator by more than
-setpoint_tolerance is refused. What the assembly had to change is reported in
-``Mechanism.assembly_warnings`` and as AssemblyWarning.
+Robot models are published with the loops open at their zero pose and with no position for
+the passive joints (nor for those the loop file's edits make): ``mechanism.found_at_assembly``
+names the joints whose initial position is only where the search starts (the URDF reader
+puts every joint the user left out of ``initial_positions`` there). The order, each step
+only where the one before failed (the search itself: assembly_search.py):
+
+1. the actuators held where ``initial_positions`` puts them (0 where it does not), every
+   other joint found: the closed pose nearest the start;
+2. only the actuators whose positions were given held, the others found too;
+3. every joint free but the locked ones: the closed pose nearest the start, as the
+   Pinocchio loader of the published collection looks for it. Used as it is where no
+   actuator's position was given or ``mechanism.assembly: free`` says so; else refused,
+   the pose printed as an ``initial_positions`` block to paste. A move of a given actuator
+   within ``setpoint_tolerance`` is accepted (rounded redundant initial positions).
+
+Actuators whose positions the assembly chose must be able to move MOBILITY either way from
+the pose it found (assembly_search.reach, the other actuators held): a pose at the edge of
+the workspace is moved into it (:func:`centre`). What the assembly had to change is
+reported in ``Mechanism.assembly_warnings`` and as AssemblyWarning.
 """
 import math
 from typing import Any, Iterable, Sequence
 import warnings
 
-from . import closure, spherical_chains
+import numpy as np
+
+from . import assembly_search, closure, idle_spins, spherical_chains
 from . import kinematics as kin
 from . import spatial as sp
 from .errors import MechanismConfigError
@@ -22,6 +37,13 @@ from .value_types import MechanismLike
 #: (rad for an angle; for a length this fraction of the mechanism's scale)
 FAR_ANGLE = 0.1
 FAR_FRACTION = 0.1
+#: how far every actuator whose position the assembly chose must be able to move either way
+#: from the assembled pose (rad; a prismatic one this fraction of the mechanism's scale),
+#: and how many times the pose is moved into the workspace to make it so
+MOBILITY = 0.05
+CENTRING_ROUNDS = 8
+#: the values of mechanism.assembly, the default first
+ASSEMBLY_MODES = ('hold', 'free')
 
 
 class AssemblyWarning(UserWarning):
@@ -29,46 +51,237 @@ class AssemblyWarning(UserWarning):
     loaded, but its geometry or initial positions are probably not what was meant."""
 
 
-def assemble(mech: MechanismLike) -> tuple[list[float], str | None, MechanismConfigError | None]:
-    """(q, moved, problem): every coordinate at the assembled pose; when closing the loops
-    moved actuators by more than setpoint_tolerance, which (text) and the
-    MechanismConfigError to raise (after the degrees of freedom are counted: a rigid
-    mechanism, whose actuators cannot be held anywhere but one pose, is the clearer
-    message), else None, None. Far moves of passive joints are reported."""
-    start = spherical_chains.with_chain_starts(
-        mech, mech.model.start(mech.initial_positions))
-    q, residual, ok = closure.assemble(mech.model, start, mech.closure_tolerance,
-                                       fixed=mech.active_index + mech.locked_index)
-    if not ok:
-        held_q, held_residual = q, residual
-        q, residual, ok = closure.assemble(mech.model, start, mech.closure_tolerance,
-                                           fixed=mech.locked_index)
-        if not ok:
-            raise MechanismConfigError(
-                'mechanism.initial_positions',
-                f'the loops cannot be closed near these positions, not even by moving '
-                f'the actuators (closure residual {held_residual:.3g} with the actuators '
-                f'held at initial_positions); {check_loops_hint(mech, held_q)}')
-        moved = [(a, j) for a, j in enumerate(mech.active_index)
-                 if abs(q[j] - start[j]) > mech.setpoint_tolerance]
-        if moved:
-            what = '; '.join(f"active joint '{mech.joints[j]}' from {start[j]:.6g} to "
-                             f'{q[j]:.6g} (by {abs(q[j] - start[j]):.3g})' for _, j in moved)
-            return q, what, MechanismConfigError(
-                'mechanism.initial_positions',
-                f'the loops cannot be closed with the actuators held at initial_positions '
-                f'(closure residual {held_residual:.3g}); they close only by moving {what}, '
-                f'more than mechanism.setpoint_tolerance ({mech.setpoint_tolerance:g}); '
-                f'{check_loops_hint(mech, held_q)}')
-        for j in mech.active_index:
-            if q[j] != start[j]:
-                note(mech, f"assembly moved active joint '{mech.joints[j]}' from "
-                           f'{start[j]:.9g} to {q[j]:.9g} (by {abs(q[j] - start[j]):.3g}, '
-                           f'within mechanism.setpoint_tolerance) to close the loops: the '
-                           f"actuators' initial_positions disagree slightly with the loop "
-                           f'closure')
-    _report_far_moves(mech, start, q)
-    return q, None, None
+def assemble(mech: MechanismLike, start: 'list[float] | None' = None
+             ) -> tuple[list[float], str | None, MechanismConfigError | None]:
+    """(q, moved, problem): every coordinate at the assembled pose (module docstring);
+    when the given actuators cannot be held, which (text) and the MechanismConfigError to
+    raise (after the degrees of freedom are counted: a rigid mechanism, whose actuators
+    cannot be held anywhere but one pose, is the clearer message), else None, None.
+    ``start``: every coordinate to start from (default: initial_positions). Each step is
+    tried with Gauss-Newton alone first, the global search only where none succeeds."""
+    if start is None:
+        start = spherical_chains.with_chain_starts(
+            mech, mech.model.start(mech.initial_positions))
+    found = set(mech.found_index)
+    given = [j for j in mech.active_index if j not in found]
+    chosen = [j for j in mech.active_index if j in found]
+    attempts = [mech.active_index] if mech.assembly == 'hold' else []
+    if attempts and chosen and given:
+        attempts.append(given)
+    best = (start, math.inf)
+    free: 'list[float] | None' = None       # a closed pose with every joint free
+    for search in (_quick, _global):
+        for actuators in attempts:
+            q, residual, ok = search(mech, start, actuators + mech.locked_index)
+            if ok:
+                _report_far_moves(mech, start, q)
+                return wrapped(mech, centre(mech, q, [j for j in chosen if j not in actuators])
+                               ), None, None
+            best = min(best, (q, residual), key=lambda item: item[1])
+        if free is None:
+            q, residual, ok = search(mech, start, mech.locked_index)
+            if ok:
+                free = assembly_search.nearest(mech.model, q, start, mech.closure_tolerance,
+                                               fixed=mech.locked_index)
+                if mech.assembly == 'hold' and given and all(
+                        abs(free[j] - start[j]) <= mech.setpoint_tolerance for j in given):
+                    _note_small_moves(mech, start, free)
+                    _report_far_moves(mech, start, free)
+                    return wrapped(mech, centre(mech, free, chosen)), None, None
+    if free is None:
+        raise MechanismConfigError(
+            'mechanism.initial_positions',
+            f'the loops cannot be closed, not even with every joint free (closure residual '
+            f'{residual:.3g} at best, from {_start_words(mech)}); {check_loops_hint(mech, q)}')
+    used = mech.assembly == 'free' or not given     # else refused, this pose offered
+    q = wrapped(mech, centre(mech, free, mech.active_index, report=used))
+    moved = [j for j in given if abs(q[j] - start[j]) > mech.setpoint_tolerance]
+    if used:
+        why = ('mechanism.assembly: free' if mech.assembly == 'free' else
+               'the loops do not close with the actuators at ' + _start_words(mech))
+        note(mech, f'{why}: assembled with every joint free at the closed pose nearest '
+                   f'{"initial_positions" if given else "the zero pose"} (as the Pinocchio '
+                   f'loader of published closed-loop models does): '
+                   f'{_actuator_words(mech, q)}. To start elsewhere, give '
+                   f'mechanism.initial_positions (cog_id_inspect prints this whole pose as '
+                   f'a block to paste)')
+        return q, None, None
+    what = '; '.join(f"active joint '{mech.joints[j]}' from {start[j]:.6g} to {q[j]:.6g} "
+                     f'(by {abs(q[j] - start[j]):.3g})' for j in moved)
+    return q, what, PoseRefused(
+        'mechanism.initial_positions',
+        f'the loops cannot be closed with the actuators held at initial_positions (closure '
+        f'residual {best[1]:.3g} at best); the closed pose nearest it, every joint '
+        f'free, moves {what}, more than mechanism.setpoint_tolerance '
+        f'({mech.setpoint_tolerance:g}). To use that pose, put it under `mechanism:`: '
+        f'{POSE_MARK}, or set `assembly: free` there to have it found at every load; '
+        f'{check_loops_hint(mech, best[0])}',
+        pose_block(mech, q))
+
+
+def wrapped(mech: MechanismLike, q: list[float]) -> list[float]:
+    """``q`` with every revolute joint whose position the assembly found (not an actuator,
+    not a locked joint) turned by whole turns into (-pi, pi]: the same pose, polished (the
+    loops stay closed to the tolerance)."""
+    keep = set(mech.active_index) | set(mech.locked_index)
+    out = list(q)
+    for j in mech.found_index:
+        if j not in keep and mech.joint_specs[j].kind.unit == 'rad' and abs(out[j]) > math.pi:
+            out[j] = math.remainder(out[j], 2.0 * math.pi)
+    if out == list(q):
+        return out
+    polished, _, ok = closure.assemble(mech.model, out, mech.closure_tolerance,
+                                       fixed=sorted(keep))
+    return polished if ok else list(q)
+
+
+def _quick(mech: MechanismLike, start: list[float], fixed: list[int]
+           ) -> tuple[list[float], float, bool]:
+    """Gauss-Newton alone (closure.assemble): the common case, at no extra cost."""
+    return closure.assemble(mech.model, start, mech.closure_tolerance, fixed=fixed)
+
+
+def _global(mech: MechanismLike, start: list[float], fixed: list[int]
+            ) -> tuple[list[float], float, bool]:
+    """The global search (assembly_search.close)."""
+    return assembly_search.close(mech.model, start, mech.closure_tolerance, fixed=fixed,
+                                 scale=mech.attachment_scale)
+
+
+class PoseRefused(MechanismConfigError):
+    """The given actuators cannot be held; ``pose``: {joint: position} of the closed pose
+    nearest them, every joint free, which the message offers in the native form (the
+    text POSE_MARK stands for it until :func:`native_block` fills it in)."""
+
+    def __init__(self, parameter: str, message: str, pose: dict) -> None:
+        self.pose = pose
+        super().__init__(parameter, message.replace(POSE_MARK, native_block(pose)))
+        self.template = message
+
+
+#: where a refusal's message puts the pose to paste
+POSE_MARK = '<pose>'
+
+
+def pose_block(mech: MechanismLike, q: Sequence[float]) -> dict:
+    """{joint: position} of every joint with a coordinate at ``q``, mechanism.joints order:
+    full precision, so that what is pasted closes as this pose did."""
+    return {name: float(q[j]) for j, name in enumerate(mech.joints)}
+
+
+def native_block(pose: dict) -> str:
+    """The pose as the native form writes it: a list, mechanism.joints order."""
+    return f"`initial_positions: [{', '.join(repr(x) for x in pose.values())}]`"
+
+
+def mapping_block(pose: dict) -> str:
+    """The pose as the URDF form writes it: a YAML flow mapping, every name quoted."""
+    return ('`initial_positions: {' + ', '.join(f'{_quoted(name)}: {value!r}'
+                                                for name, value in pose.items()) + '}`')
+
+
+def _quoted(name: str) -> str:
+    return '"' + name.replace('\\', '\\\\').replace('"', '\\"') + '"'
+
+
+def _start_words(mech: MechanismLike) -> str:
+    found = set(mech.found_index)
+    given = [j for j in mech.active_index if j not in found]
+    if not given:
+        return 'their zero positions (none given in initial_positions)'
+    return 'initial_positions'
+
+
+def _actuator_words(mech: MechanismLike, q: Sequence[float]) -> str:
+    return 'the actuators at ' + ', '.join(
+        f"'{mech.joints[j]}' {q[j]:.6g}" for j in mech.active_index)
+
+
+def _note_small_moves(mech: MechanismLike, start: Sequence[float], q: Sequence[float]) -> None:
+    """A note per given actuator the assembly moved (within setpoint_tolerance); moves at the
+    level of rounding are not reported."""
+    for j in mech.active_index:
+        if abs(q[j] - start[j]) > max(1e-9, 10.0 * mech.closure_tolerance):
+            note(mech, f"assembly moved active joint '{mech.joints[j]}' from "
+                       f'{start[j]:.9g} to {q[j]:.9g} (by {abs(q[j] - start[j]):.3g}, '
+                       f'within mechanism.setpoint_tolerance) to close the loops: the '
+                       f"actuators' initial_positions disagree slightly with the loop "
+                       f'closure')
+
+
+def mobility(mech: MechanismLike, j: int) -> float:
+    """How far actuator (joint) ``j`` must be able to move either way: MOBILITY rad, or for
+    a length MOBILITY of the mechanism's scale."""
+    unit = mech.joint_specs[j].kind.unit
+    return MOBILITY if unit == 'rad' else MOBILITY * mech.attachment_scale
+
+
+def stuck(mech: MechanismLike, q: Sequence[float], joints: Iterable[int]) -> list:
+    """(joint, direction) of each of ``joints`` (actuators) that cannot move its mobility
+    that way from ``q``, the locked joints and the other actuators held; those the loops
+    make it move with (a coupled or dependent actuator's partners) follow it."""
+    held = list(mech.active_index) + list(mech.locked_index)
+    out = []
+    for j in joints:
+        partners = _partners(mech, q, j)
+        fixed = [k for k in held if k not in partners]
+        for direction in (1.0, -1.0):
+            if assembly_search.reach(mech.model, q, j, direction * mobility(mech, j),
+                                     mech.closure_tolerance, fixed) is None:
+                out.append((j, direction))
+    return out
+
+
+def _partners(mech: MechanismLike, q: Sequence[float], j: int) -> set:
+    """The other actuators that move whenever actuator (joint) ``j`` moves, at ``q``: those
+    with a rate in the motion that moves ``j`` at unit rate and the other actuators least
+    (the locked joints held)."""
+    matrix, _ = closure.closure_jacobian_matrix(mech.model, q)
+    rows = [matrix] + [np.eye(mech.n_coordinates)[mech.locked_index]]
+    motions = idle_spins.null_rows(np.vstack(rows)).T
+    others = [k for k in mech.active_index if k != j]
+    if not motions.size or not others:
+        return set()
+    # least |other actuators' rates|^2 subject to rate of j = 1
+    a, b = motions[others], motions[j]
+    weights = np.linalg.lstsq(np.vstack([a, 1e6 * b[None]]),
+                              np.concatenate([np.zeros(len(others)), [1e6]]), rcond=None)[0]
+    rates = a @ weights
+    return {k for k, rate in zip(others, rates) if abs(rate) > 1e-6}
+
+
+def centre(mech: MechanismLike, q: list[float], joints: Iterable[int],
+           report: bool = True) -> list[float]:
+    """``q`` moved into the workspace until each of ``joints`` (actuators whose positions
+    the assembly chose) can move its mobility either way: an actuator stuck one way is
+    moved its mobility the other way, the others held. A note names any still stuck
+    (with ``report``)."""
+    joints = list(joints)
+    if not joints:
+        return q
+    held = list(mech.active_index) + list(mech.locked_index)
+    blocked = stuck(mech, q, joints)
+    for _ in range(CENTRING_ROUNDS):
+        if not blocked:
+            return q
+        for j, direction in blocked:
+            if (j, -direction) in blocked:
+                continue             # stuck both ways: a singular pose, left for the note
+            moved = assembly_search.reach(mech.model, q, j, -direction * mobility(mech, j),
+                                          mech.closure_tolerance, held)
+            if moved is not None:
+                q = moved
+        again = stuck(mech, q, joints)
+        if again == blocked:
+            break
+        blocked = again
+    if blocked and report:
+        names = ', '.join(f"'{mech.joints[j]}' ({'+' if d > 0 else '-'})" for j, d in blocked)
+        note(mech, f'at the assembled pose the actuator(s) {names} cannot move '
+                   f'{MOBILITY:g} rad (or {MOBILITY:.0%} of the mechanism scale) that way with '
+                   f'the others held: the pose is at the edge of the workspace or singular; '
+                   f'give mechanism.initial_positions inside the workspace')
+    return q
 
 
 def far_move_limit(mech: MechanismLike, j: int) -> tuple[float, str | None]:
@@ -90,7 +303,7 @@ def attachment_scale(specs: Sequence[kin.JointSpec]) -> float:
 
 def _report_far_moves(mech: MechanismLike, start: Sequence[float], q: Sequence[float]) -> None:
     """A note for every passive joint the assembly moved far from initial_positions."""
-    held = set(mech.active_index) | set(mech.locked_index)
+    held = set(mech.active_index) | set(mech.locked_index) | set(mech.found_index)
     far: list[str] = []
     moved: list[int] = []
     for j, (a, b) in enumerate(zip(start[:len(mech.joints)], q)):

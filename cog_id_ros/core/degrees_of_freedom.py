@@ -12,6 +12,7 @@ fail raises MechanismConfigError with what to change.
 """
 import itertools
 import math
+from typing import Iterable
 
 import numpy as np
 
@@ -22,6 +23,8 @@ from .value_types import FloatArray, MechanismLike
 
 #: relative singular value below which A loses rank
 RANK_TOLERANCE = 1e-9
+#: sets of primary actuators compared one by one up to this many (beyond: chosen greedily)
+COMBINATIONS = 5000
 
 
 def count(mech: MechanismLike, moved: str | None,
@@ -36,7 +39,6 @@ def count(mech: MechanismLike, moved: str | None,
                        else np.zeros(0))
     rank = _rank(singular_values)
     dof = n - rank
-    m = len(mech.active_joints)
     if dof == 0:
         raise MechanismConfigError(
             'mechanism.joints',
@@ -52,8 +54,9 @@ def count(mech: MechanismLike, moved: str | None,
                f'positions) count: mechanism.locked_joints' if mech.locked_joints else ''))
     if problem is not None:
         raise problem
-    if m < dof:
-        idle_spins.resolve(mech, matrix, rank, dof)   # raises: locks to add, or what moves
+    basis = idle_spins.free_motions(mech, matrix)
+    if basis.shape[1]:           # motion left with every actuator held (a redundant set too)
+        idle_spins.resolve(mech, basis, rank, dof)   # raises: locks to add, or what moves
     return matrix, rank, dof
 
 
@@ -67,9 +70,12 @@ def primary_actuators(mech: MechanismLike, matrix: FloatArray, dof: int) -> list
     best: tuple[int, ...] | None = None
     best_cond = math.inf
     n = mech.n_coordinates
-    combos = itertools.combinations(range(len(mech.active_index)), dof)
+    combos: Iterable[tuple[int, ...]] = itertools.combinations(range(len(mech.active_index)),
+                                                               dof)
+    if math.comb(len(mech.active_index), dof) > COMBINATIONS:
+        combos = [_greedy_primary(mech, matrix, dof)]
     locked = set(mech.locked_index)
-    for combo in itertools.islice(combos, 5000):
+    for combo in combos:
         fixed = {mech.active_index[i] for i in combo} | locked
         free = [j for j in range(n) if j not in fixed]
         cond = _condition_number(matrix[:, free])
@@ -92,6 +98,26 @@ def primary_actuators(mech: MechanismLike, matrix: FloatArray, dof: int) -> list
             f'positions (closure Jacobian condition number {best_cond:.3g}): some passive '
             f'joints could move with every actuator held{hint}')
     return list(best)
+
+
+def _greedy_primary(mech: MechanismLike, matrix: FloatArray, dof: int) -> tuple[int, ...]:
+    """``dof`` actuators (indices into active_joints) chosen greedily where there are too
+    many sets to compare: the motions of the mechanism (null space of A, the locked joints
+    held) as rows per actuator; each step takes the actuator whose row is furthest from
+    those taken (pivoted Gram-Schmidt), ties by order."""
+    stacked = idle_spins.with_locks(mech, matrix)
+    motions = idle_spins.null_rows(stacked).T if stacked.size else np.eye(mech.n_coordinates)
+    rows = motions[mech.active_index].copy()
+    chosen: list[int] = []
+    for _ in range(dof):
+        norms = np.linalg.norm(rows, axis=1)
+        norms[chosen] = -1.0
+        k = int(np.argmax(norms))
+        chosen.append(k)
+        if norms[k] > 0.0:
+            unit = rows[k] / norms[k]
+            rows -= np.outer(rows @ unit, unit)
+    return tuple(sorted(chosen))
 
 
 def report_dependent(mech: MechanismLike, matrix: FloatArray) -> None:

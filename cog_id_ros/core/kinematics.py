@@ -104,7 +104,8 @@ class KinematicModel:
     """The spanning tree and the loop-closing joints of a mechanism, ready to evaluate."""
 
     def __init__(self, link_names: Iterable[str], joints: Iterable[JointSpec],
-                 closures: Iterable[JointSpec] = ()) -> None:
+                 closures: Iterable[JointSpec] = (),
+                 couplings: Iterable['LoopJoint'] = ()) -> None:
         self.link_names = list(link_names)
         self.joints = list(joints)            # joints with a coordinate
         self.closures = list(closures)        # spherical, universal, fixed
@@ -124,8 +125,11 @@ class KinematicModel:
         self.edge_of_link: list[Any] = [None] * self.n_links   # int: a reached link's edge
         self._build_tree()
         self.n_coordinates = len(self.coordinate_kinds)
-        #: every constraint of the closure equations: the loops, then a unit quaternion each
-        self.constraints = self.loops + self.units
+        #: coupled joints (couplings.py): one equation each, between two coordinates
+        self.couplings = list(couplings)
+        #: every constraint of the closure equations: the loops, a unit quaternion each,
+        #: then the couplings
+        self.constraints = self.loops + self.units + self.couplings
         #: per coordinate, the indices of the constraints whose equations it enters
         self.loops_of_joint: list[list[int]] = [[] for _ in range(self.n_coordinates)]
         for li, lp in enumerate(self.constraints):

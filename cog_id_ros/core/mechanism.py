@@ -23,7 +23,15 @@ import warnings
 
 import numpy as np
 
-from . import assembly, closure, degrees_of_freedom, idle_spins, joints, spherical_chains
+from . import (
+    assembly,
+    closure,
+    couplings,
+    degrees_of_freedom,
+    idle_spins,
+    joints,
+    spherical_chains,
+)
 from .assembly import AssemblyWarning
 from .errors import MechanismConfigError
 from .kinematics import BASE, JointSpec, KinematicModel
@@ -33,10 +41,11 @@ from .value_types import FloatArray
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
-                  'max_condition_number', 'closure_tolerance', 'locked_joints', 'idle_spins')
+                  'max_condition_number', 'closure_tolerance', 'locked_joints', 'idle_spins',
+                  'found_at_assembly', 'assembly')
 LINK_KEYS = ('mass', 'com', 'inertia')
 JOINT_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy',
-              'axis', 'axis2', 'lower', 'upper', 'effort')
+              'axis', 'axis2', 'lower', 'upper', 'effort') + couplings.KEYS
 
 DEFAULT_SETPOINT_TOLERANCE = 1e-3      # rad or m: larger redundant disagreements are rejected
 DEFAULT_MAX_CONDITION_NUMBER = 1e6     # closure Jacobian (passive joints), Frobenius norm
@@ -96,9 +105,12 @@ class Mechanism:
         self._read_links(reader)
         self._read_joints(reader)
         self._read_positions(reader)
+        self._read_couplings(reader)
         idle_spins.read_locks(self, reader)
         self._reject_unknown(reader)
-        self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs)
+        self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs, [
+            couplings.constraint(f, self.joints.index(f), self.joints.index(leader), m, o)
+            for f, leader, m, o in self.couplings])
         #: the solver's coordinates: the joints (mechanism.joints), then the hidden ones of
         #: spherical and universal joints in the spanning tree (kinematics.py)
         self.n_coordinates = self.model.n_coordinates
@@ -281,6 +293,20 @@ class Mechanism:
         self.initial_positions = bounded('mechanism.initial_positions', values,
                                          MAX_COORDINATE, 'rad or m')
         index = {name: k for k, name in enumerate(self.joints)}
+        #: the joints whose initial position is only where the assembly starts its search
+        #: (mechanism.found_at_assembly; the URDF form: those initial_positions leaves out)
+        self.found_at_assembly = r.string_list('mechanism.found_at_assembly') or []
+        for name in self.found_at_assembly:
+            if name not in index:
+                raise MechanismConfigError(
+                    'mechanism.found_at_assembly',
+                    f"'{name}' is not a revolute or prismatic joint of mechanism.joints")
+        self.found_index = sorted(index[name] for name in self.found_at_assembly)
+        self.assembly = r.string('mechanism.assembly', default=assembly.ASSEMBLY_MODES[0])
+        if self.assembly not in assembly.ASSEMBLY_MODES:
+            raise MechanismConfigError(
+                'mechanism.assembly', f"must be {' or '.join(map(repr, assembly.ASSEMBLY_MODES))}"
+                                      f', got {self.assembly!r}')
         #: per active joint: its kind object (joints.py), (lower, upper) position limits
         #: and the effort limit (inf: none)
         self.active_kinds = [self.joint_specs[index[a]].kind for a in self.active_joints]
@@ -291,6 +317,31 @@ class Mechanism:
         self.limited_actuators = [(a, lo, hi) for a, (lo, hi) in
                                   enumerate(self.active_position_limits)
                                   if lo > -math.inf or hi < math.inf]
+
+    def _read_couplings(self, r: ParameterReader) -> None:
+        """``couplings``: (follower, leader, multiplier, offset) of every joint that
+        ``joints.<name>.mimic`` couples to another (couplings.py)."""
+        self.couplings: list[tuple[str, str, float, float]] = []
+        for spec in self.joint_specs + self.closure_specs:
+            prefix = f'joints.{spec.name}.'
+            leader = r.string(prefix + 'mimic')
+            if leader is None:
+                continue
+            if not spec.kind.has_coordinate:
+                raise MechanismConfigError(
+                    prefix + 'mimic', f'a {spec.kind.name} joint has no coordinate to couple '
+                                      f'(only revolute and prismatic joints can mimic)')
+            if leader not in self.joints:
+                raise MechanismConfigError(
+                    prefix + 'mimic', f"'{leader}' is not a revolute or prismatic joint of "
+                                      f'mechanism.joints')
+            if leader == spec.name:
+                raise MechanismConfigError(prefix + 'mimic', 'a joint cannot mimic itself')
+            multiplier = r.number(prefix + 'mimic_multiplier', default=1.0)
+            offset = r.number(prefix + 'mimic_offset', default=0.0)
+            bounded(prefix + 'mimic_multiplier', (multiplier,), MAX_COORDINATE, '')
+            bounded(prefix + 'mimic_offset', (offset,), MAX_COORDINATE, 'rad or m')
+            self.couplings.append((spec.name, leader, multiplier, offset))
 
     def _reject_unknown(self, r: ParameterReader) -> None:
         for name in r.unused('mechanism.'):
@@ -330,7 +381,10 @@ class Mechanism:
             return
         params = spherical_chains.solver_parameters(self.parameters, chains, self.joints,
                                                     self.assembled_positions)
-        params.pop('mechanism.idle_spins', None)         # the spins are locked already
+        # the spins are locked already, and every position is where the assembly put it
+        for name in ('mechanism.idle_spins', 'mechanism.found_at_assembly',
+                     'mechanism.assembly'):
+            params.pop(name, None)
         if self.locked_joints:
             params['mechanism.locked_joints'] = list(self.locked_joints)
         try:
@@ -373,12 +427,15 @@ class Mechanism:
     def _analyse(self) -> FloatArray:
         """Assembly and the degrees of freedom (assembly.py, degrees_of_freedom.py); with
         ``idle_spins: lock``, once more with the joints that take out the idle spins
-        locked (idle_spins.py). The closure Jacobian at the assembled pose."""
+        locked (idle_spins.py), held where the first assembly put them (or at their
+        initial positions where those were given). The closure Jacobian at the assembled
+        pose."""
         #: True once idle_spins: lock has locked joints of its own choice
         self.spins_locked = False
         notes: list[str] = []
+        start = None
         while True:
-            q, moved, problem = assembly.assemble(self)
+            q, moved, problem = assembly.assemble(self, start)
             self._assembled(q)
             try:
                 matrix, self.closure_rank, self.dof = degrees_of_freedom.count(
@@ -387,9 +444,15 @@ class Mechanism:
                 self.spins_locked, notes = True, lock.notes
                 self.locked_joints = self.locked_joints + [self.joints[j] for j in lock.joints]
                 self.locked_index = sorted(self.locked_index + lock.joints)
+                start = [q[j] if j in self.found_index or j >= len(self.joints) else
+                         self.initial_positions[j] for j in range(len(q))]
                 continue
             for text in notes:
                 assembly.note(self, text)
+            # where the assembly found a position, that is the initial position from here on
+            found = set(self.found_index)
+            self.initial_positions = tuple(
+                float(q[j]) if j in found else x for j, x in enumerate(self.initial_positions))
             return matrix
 
     def _assembled(self, q: Sequence[float]) -> None:

@@ -18,7 +18,8 @@ their two links into one rigid body (mass, COG and inertia combined with the par
 theorem, in the frame of the link that survives); every joint, closure and base link that
 refers to a merged link is re-expressed in the survivor's frame. ``continuous`` joints are
 revolute joints without position limits; ``floating`` and ``planar`` joints (more than one
-coordinate) and ``mimic`` (a coupling the core does not model) are refused naming the joint.
+coordinate) are refused naming the joint; ``<mimic>`` couples a joint to another
+(core/couplings.py: ``joints.<name>.mimic``, ``mimic_multiplier``, ``mimic_offset``).
 ``<dynamics>``, ``<safety_controller>``, ``<calibration>``, ``<visual>``, ``<collision>``,
 ``<transmission>``, ``<gazebo>`` and ``<material>`` are ignored.
 
@@ -78,6 +79,12 @@ def read(params: dict, base_dir: 'str | dict | None' = None) -> tuple:
         raise MechanismConfigError('parameters', f'must be a dict, got {type(params).__name__}')
     r = ParameterReader(params)
     flat = r.params
+    if 'mechanism.found_at_assembly' in flat:
+        raise MechanismConfigError(
+            'mechanism.found_at_assembly', 'is not read with a URDF (robot_description or '
+                                           'mechanism.urdf_file): leave a joint out of '
+                                           'mechanism.initial_positions to have its position '
+                                           'found at assembly')
     for name in ('mechanism.links', 'mechanism.joints'):
         if name in flat:
             raise MechanismConfigError(
@@ -149,7 +156,10 @@ def _native(r, robot, closures, base, bodies, loop_file):
     coordinates = [j.name for j in tree_joints if j.joint_kind.has_coordinate] + [
         c.name for c in closures if joints.kind(c.kind).has_coordinate]
     _active(r, robot, closures, loop_file, out)
-    out['mechanism.initial_positions'] = _initial_positions(r, robot, closures, coordinates)
+    given = _initial_positions(r, robot, closures, coordinates)
+    out['mechanism.initial_positions'] = [given.get(name, 0.0) for name in coordinates]
+    # the joints left out: their positions are found by the assembly (core/assembly.py)
+    out['mechanism.found_at_assembly'] = [name for name in coordinates if name not in given]
     for name in links:
         mass, com, inertia = mass_properties(bodies, name)
         out[f'links.{name}.mass'] = float(mass)
@@ -159,9 +169,16 @@ def _native(r, robot, closures, base, bodies, loop_file):
         _native_joint(out, bodies, joint.name, joint.joint_kind.name,
                       joint.parent, joint.child, (joint.xyz, joint.rpy, ZERO, ZERO),
                       joint.axis)
+        prefix = f'joints.{joint.name}.'
+        if joint.mimic is not None:
+            leader, multiplier, offset = joint.mimic
+            if leader not in robot.joints:
+                raise robot.error(joint.line, f"<mimic> of joint '{joint.name}' names "
+                                              f"'{leader}', which the URDF does not have")
+            out[prefix + 'mimic'] = leader
+            out[prefix + 'mimic_multiplier'], out[prefix + 'mimic_offset'] = multiplier, offset
         if joint.limit is not None:
             lower, upper, effort = joint.limit
-            prefix = f'joints.{joint.name}.'
             if lower is not None:
                 out[prefix + 'lower'], out[prefix + 'upper'] = lower, upper
             if effort is not None:
@@ -278,4 +295,4 @@ def _initial_positions(r, robot, closures, coordinates):
                      f"'{name}' is neither a revolute or prismatic joint of the URDF nor in "
                      f"mechanism.loop_closures" + _edited(robot, name))
         given[name] = value
-    return [given.get(name, 0.0) for name in coordinates]
+    return given

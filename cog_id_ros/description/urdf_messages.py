@@ -10,6 +10,7 @@ there; anything it does not recognise passes unchanged.
 import re
 
 from ..core import joints
+from ..core.assembly import POSE_MARK, PoseRefused, mapping_block
 from ..core.errors import MechanismConfigError
 from ..core.parameters import split_owner
 
@@ -42,6 +43,8 @@ def for_urdf_user(error: MechanismConfigError, native: dict, sources: dict
     ``closures``: the Closure objects, which name their own origin)."""
     prefix = f'{error.parameter}: '
     message = str(error)[len(prefix):] if str(error).startswith(prefix) else str(error)
+    if isinstance(error, PoseRefused):      # the pose to paste, as the URDF form writes it
+        message = error.template.replace(POSE_MARK, mapping_block(error.pose))
     for pattern, advice in _ADVICE:
         message = pattern.sub(advice, message)
     index = re.search(r' at index (\d+)$', message)

@@ -41,6 +41,7 @@ class _Joint:
         self.parent, self.child = parent, child
         self.xyz, self.rpy, self.axis = xyz, rpy, axis
         self.limit = limit       # (lower or None, upper or None, effort or None) or None
+        self.mimic = None        # (leader joint, multiplier, offset) of a <mimic>, or None
 
     @property
     def welds(self):
@@ -184,11 +185,7 @@ class Robot:
         if kind not in URDF_JOINT_TYPES:
             raise self.error(element.line, f"{what} has type {show(kind)}; must be one of "
                                            f"{', '.join(URDF_JOINT_TYPES)}")
-        mimic = self._one(element, 'mimic', what)
-        if mimic is not None:
-            raise self.error(mimic.line, f'{what} has <mimic>: coupled joints are not '
-                                         f'supported (model the coupling as a mechanism, or '
-                                         f'drive the joint as an actuator of its own)')
+        mimic = self._mimic(element, what)
         ends = []
         for side in ('parent', 'child'):
             tag = self._one(element, side, what, required=True)
@@ -208,7 +205,24 @@ class Robot:
         tag = self._one(element, 'limit', what)
         if tag is not None:
             limit = self._limit(tag, what, kind)
-        return _Joint(name, element.line, kind, ends[0], ends[1], xyz, rpy, axis, limit)
+        joint = _Joint(name, element.line, kind, ends[0], ends[1], xyz, rpy, axis, limit)
+        joint.mimic = mimic
+        return joint
+
+    def _mimic(self, element, what):
+        """(leader, multiplier, offset) of a joint's <mimic>, as urdfdom reads it (multiplier
+        1 and offset 0 where not written), or None."""
+        tag = self._one(element, 'mimic', what)
+        if tag is None:
+            return None
+        leader = tag.attrib.get('joint')
+        if not leader:
+            raise self.error(tag.line, f'<mimic> of {what} has no joint attribute')
+        (multiplier,) = self._numbers(tag, 'multiplier', what, count=1, default=(1.0,),
+                                      bound=MAX_COORDINATE)
+        (offset,) = self._numbers(tag, 'offset', what, count=1, default=(0.0,),
+                                  bound=MAX_COORDINATE, unit='rad or m')
+        return leader, multiplier, offset
 
     def _limit(self, tag, what, kind):
         """``(lower, upper, effort)`` of a joint's <limit>, each None when the joint does not
