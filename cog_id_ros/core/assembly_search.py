@@ -22,7 +22,7 @@ pose). :func:`reach` moves one coordinate by continuation, the others held or so
 the assembly checks that every actuator can move from the pose it found (assembly.py).
 Everything here runs at load only.
 """
-from typing import Iterable, Sequence
+from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -36,6 +36,8 @@ from .value_types import FloatArray
 LM_ITERATIONS = 200
 LM_DAMPING = 1e-2
 LM_MAX_DAMPING = 1e14
+#: the dampings an iteration tries together, as multiples of the current one
+DAMPINGS = (0.1, 1.0, 10.0, 100.0, 1000.0)
 STALL, STALL_FRACTION = 20, 0.01
 #: central-difference step of the residual's Jacobian (rad or m)
 DIFFERENCE_STEP = 1e-7
@@ -82,8 +84,9 @@ def levenberg_marquardt(model: kin.KinematicModel, start: Sequence[float],
                         iterations: int = LM_ITERATIONS) -> FloatArray:
     """``start`` moved (all coordinates but ``fixed``) to a least-squares minimum of the
     closure residual, or as close to one as ``iterations`` go: damped steps on the
-    residual's own Jacobian, each accepted only when it lowers |Phi|. Closed to about
-    ``tol`` at best; closure.assemble polishes."""
+    residual's own Jacobian, a step kept only when it lowers |Phi|. Each iteration tries
+    DAMPINGS times the current damping together (one batch) and keeps the best. Closed to
+    about ``tol`` at best; closure.assemble polishes."""
     q = np.array(start, dtype=float)
     held = set(fixed)
     moving = [j for j in range(len(q)) if j not in held]
@@ -93,6 +96,7 @@ def levenberg_marquardt(model: kin.KinematicModel, start: Sequence[float],
     value = float(phi @ phi)
     damping = LM_DAMPING
     history = [value]
+    eye = np.eye(len(moving))
     for _ in range(iterations):
         if not np.isfinite(value) or np.max(np.abs(phi), initial=0.0) < tol:
             break
@@ -100,26 +104,32 @@ def levenberg_marquardt(model: kin.KinematicModel, start: Sequence[float],
             break
         gradient = jac.T @ phi
         normal = jac.T @ jac
-        scaling = np.diag(np.diag(normal)) + 1e-9 * np.eye(len(moving))
-        while damping <= LM_MAX_DAMPING:
+        scaling = np.diag(np.diag(normal)) + 1e-9 * eye
+        trials, dampings = [], []
+        for factor in DAMPINGS:
             try:
-                step = np.linalg.solve(normal + damping * scaling, -gradient)
+                step = np.linalg.solve(normal + damping * factor * scaling, -gradient)
             except np.linalg.LinAlgError:
-                damping *= 4.0
                 continue
             trial = q.copy()
             trial[moving] += step
-            trial_phi = residuals(model, trial[:, None])[0][:, 0]
-            trial_value = float(trial_phi @ trial_phi)
-            if trial_value < value:
-                q, value = trial, trial_value
-                phi, jac, _ = residual_jacobian(model, q, moving)
-                damping = max(damping / 3.0, 1e-12)
-                history.append(value)
-                break
-            damping *= 4.0
-        else:
+            trials.append(trial)
+            dampings.append(damping * factor)
+        if not trials:
             break
+        trial_phi = residuals(model, np.array(trials).T)[0]
+        values = np.sum(trial_phi * trial_phi, axis=0)
+        values[~np.isfinite(values)] = np.inf
+        best = int(np.argmin(values))
+        if not values[best] < value:
+            damping *= DAMPINGS[-1] * 4.0
+            if damping > LM_MAX_DAMPING:
+                break
+            continue
+        q, value = trials[best], float(values[best])
+        phi, jac, _ = residual_jacobian(model, q, moving)
+        damping = max(dampings[best] / 3.0, 1e-12)
+        history.append(value)
     return q
 
 
@@ -144,20 +154,46 @@ def close(model: kin.KinematicModel, start: Sequence[float], tol: float,
     held (module docstring: Gauss-Newton, Levenberg-Marquardt, then ``restarts`` spread
     starts). Not closed: the pose with the least residual found."""
     fixed = sorted(set(fixed))
-    q, residual, ok = _attempt(model, start, tol, fixed)
-    if ok:
-        return q, residual, ok
-    best = (q, residual)
-    rng = np.random.default_rng(SEED)
-    spread = _spread(model, fixed, scale)
-    for _ in range(restarts):
-        trial = np.array(start, dtype=float) + spread * rng.uniform(-1.0, 1.0, len(spread))
-        q, residual, ok = _attempt(model, trial.tolist(), tol, fixed)
+    best: tuple[list[float], float] = (list(start), float('inf'))
+    for trial in _starts(model, start, fixed, scale, restarts):
+        q, residual, ok = _attempt(model, trial, tol, fixed)
         if ok:
             return q, residual, ok
         if residual < best[1]:
             best = (q, residual)
     return best[0], best[1], False
+
+
+def closest(model: kin.KinematicModel, start: Sequence[float], tol: float,
+            fixed: Iterable[int] = (), scale: float = 1.0,
+            restarts: int = RESTARTS) -> Iterator[list[list[float]]]:
+    """Closed poses found from ``start`` and from ``restarts`` spread starts (each as
+    :func:`close` tries one, then slid to the :func:`nearest` pose), nearest to ``start``
+    first: the loops of a mechanism close in several ways (assembly modes), and the first
+    one found is not always the nearest. Lazily: first [the pose from ``start``] alone
+    (where it will do, nothing more is searched), then every pose found, sorted; empty
+    lists where none closes."""
+    fixed = sorted(set(fixed))
+    goal = np.asarray(start[:model.n_joints], dtype=float)
+    found = []
+    for k, trial in enumerate(_starts(model, start, fixed, scale, restarts)):
+        q, _, ok = _attempt(model, trial, tol, fixed)
+        if ok:
+            found.append(nearest(model, q, start, tol, fixed))
+        if k == 0:
+            yield list(found)
+    yield sorted(found, key=lambda q: float(np.linalg.norm(np.asarray(q[:model.n_joints])
+                                                           - goal)))
+
+
+def _starts(model: kin.KinematicModel, start: Sequence[float], fixed: Sequence[int],
+            scale: float, restarts: int) -> list[list[float]]:
+    """``start``, then ``restarts`` starts spread about it (a fixed seed)."""
+    rng = np.random.default_rng(SEED)
+    spread = _spread(model, fixed, scale)
+    return [list(start)] + [
+        (np.array(start, dtype=float) + spread * rng.uniform(-1.0, 1.0, len(spread))).tolist()
+        for _ in range(restarts)]
 
 
 def _spread(model: kin.KinematicModel, fixed: Sequence[int], scale: float) -> FloatArray:
@@ -204,15 +240,21 @@ def nearest(model: kin.KinematicModel, q: Sequence[float], target: Sequence[floa
 
 
 def reach(model: kin.KinematicModel, q: Sequence[float], joint: int, delta: float,
-          tol: float, fixed: Iterable[int]) -> 'list[float] | None':
+          tol: float, fixed: Iterable[int], parts: int = REACH_PARTS,
+          steepest: float = float('inf')) -> 'list[float] | None':
     """``q`` with coordinate ``joint`` moved by ``delta`` (the coordinates ``fixed`` held,
-    the others solved), in REACH_PARTS closed steps; None where a step cannot close."""
+    the others solved), in ``parts`` closed steps; None where a step cannot close, or
+    moves another joint more than ``steepest`` times as far as ``joint`` (near a dead
+    centre the others turn ever faster: Newton may close past it on another branch)."""
     held = sorted(set(fixed) | {joint})
     current = list(q)
-    for _ in range(REACH_PARTS):
-        current[joint] += delta / REACH_PARTS
+    step = abs(delta) / parts
+    for _ in range(parts):
+        before = current[:model.n_joints]
+        current[joint] += delta / parts
         current, _, ok = closure.assemble(model, current, tol, fixed=held)
-        if not ok:
+        if not ok or max((abs(a - b) for a, b in zip(current, before)), default=0.0) > \
+                steepest * step:
             return None
     return current
 

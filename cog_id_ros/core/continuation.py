@@ -22,12 +22,10 @@ method on the loop equations. The rules, shared by every serial path of the solv
   bounded amount of work whatever the input.
 """
 import math
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Sequence
 
 from .value_types import Lane
-
-if TYPE_CHECKING:
-    from .mechanism import Mechanism
+from .value_types import MechanismLike as Mechanism
 
 #: a pose on its branch: (every coordinate, the velocity basis V there)
 State = tuple[Sequence[Lane], Any]

@@ -19,7 +19,9 @@ from typing import Any
 
 from . import kinematics as kin
 from .closure import LoopState
-from .value_types import Lane, LaneMatrix, Lanes, Ops, Twists
+from .errors import MechanismConfigError
+from .parameters import ParameterReader
+from .value_types import Lane, LaneMatrix, Lanes, MechanismLike, Ops, Twists
 
 #: the keys a joint with a coordinate reads for its coupling
 KEYS = ('mimic', 'mimic_multiplier', 'mimic_offset')
@@ -62,3 +64,33 @@ def constraint(name: str, follower: int, leader: int, multiplier: float,
     kind: Any = Coupling(follower, leader, multiplier, offset)
     return kin.LoopJoint(None, kin.BASE, kin.BASE, kind, name,
                          cycle=[(follower, 1.0), (leader, -multiplier)])
+
+
+def read_couplings(mech: MechanismLike, r: ParameterReader, bound: float) -> None:
+    """``mech.couplings``: (follower, leader, multiplier, offset) of every joint that
+    ``joints.<name>.mimic`` couples to another, checked (multiplier and offset within
+    +-``bound``, the mechanism's bound on coordinates)."""
+    mech.couplings = []
+    for spec in mech.joint_specs + mech.closure_specs:
+        prefix = f'joints.{spec.name}.'
+        leader = r.string(prefix + 'mimic')
+        if leader is None:
+            continue
+        if not spec.kind.has_coordinate:
+            raise MechanismConfigError(
+                prefix + 'mimic', f'a {spec.kind.name} joint has no coordinate to couple '
+                                  f'(only revolute and prismatic joints can mimic)')
+        if leader not in mech.joints:
+            raise MechanismConfigError(
+                prefix + 'mimic', f"'{leader}' is not a revolute or prismatic joint of "
+                                  f'mechanism.joints')
+        if leader == spec.name:
+            raise MechanismConfigError(prefix + 'mimic', 'a joint cannot mimic itself')
+        values = []
+        for key, default in (('mimic_multiplier', 1.0), ('mimic_offset', 0.0)):
+            value = r.number(prefix + key, default=default)
+            if abs(value) > bound:
+                raise MechanismConfigError(prefix + key, f'must lie within +-{bound:g}, got '
+                                                         f'{value!r}')
+            values.append(value)
+        mech.couplings.append((spec.name, leader, *values))

@@ -46,11 +46,12 @@ SPIN_TOLERANCE = 1e-6
 #: a joint takes part in a spin when its rate in a unit spin is above this (rad/s or m/s)
 SHARE_TOLERANCE = 1e-6
 #: shares within this fraction of the largest are a tie (the first joint wins)
-TIE = 1e-9
+TIE = 1e-6
 #: the centre of mass counts as off the spin axis beyond this fraction of the rod's length
 OFF_AXIS = 1e-9
 #: a set whose centre of mass is further from the axis than this fraction of the distance
-#: between the joints it hangs on swings (a pendulum, a door): a forgotten actuator
+#: between the joints it hangs on (and not on the axis) swings (a pendulum, a door): a
+#: forgotten actuator
 SWING = 0.1
 
 
@@ -87,11 +88,22 @@ def read_locks(mech: MechanismLike, r: ParameterReader) -> None:
 class LockThem(Exception):
     """Raised during the degrees-of-freedom count with ``idle_spins: lock``: lock
     ``joints`` (indices into Mechanism.joints) and analyse again; ``notes`` are the
-    assembly warnings that say so."""
+    assembly warnings that say so, ``spins`` the records of what spun (:func:`record`)."""
 
-    def __init__(self, joints: list, notes: list) -> None:
+    def __init__(self, joints: list, notes: list, spins: list) -> None:
         super().__init__(', '.join(map(str, joints)))
-        self.joints, self.notes = joints, notes
+        self.joints, self.notes, self.spins = joints, notes, spins
+
+
+def record(mech: MechanismLike, spin: 'Spin', locked: 'int | None') -> dict:
+    """What inspect shows of a spin (``Mechanism.idle_spin_sets``): the set's links
+    (``links``; the massless ones that move with it in ``moving``), the joints it hangs on
+    (``ends``), the joint locked (or None) and the others that could be."""
+    return {'links': [mech.links[k] for k in spin.links],
+            'moving': [mech.links[k] for k in spin.moving],
+            'ends': list(spin.ends),
+            'locked': None if locked is None else mech.joints[locked],
+            'others': [mech.joints[j] for j, _ in spin.shares if j != locked]}
 
 
 @dataclass
@@ -225,7 +237,7 @@ def find_spins(mech: MechanismLike, basis: FloatArray) -> list:
             continue                      # a translation or a screw: not a spin
         spin = _spin(mech, frames, tuple(members), basis @ (y / size),
                      (w / size, np.cross(w, v) / size ** 2))
-        if spin.span > SPIN_TOLERANCE * scale and spin.offset <= SWING * spin.span:
+        if spin.offset <= max(SWING * spin.span, SPIN_TOLERANCE * scale):
             spins.append(spin)            # else a body that swings about one joint's line
     for c in range(massless.shape[1]):
         rates = basis @ massless[:, c]
@@ -300,7 +312,11 @@ def _shares(mech: MechanismLike, rates: FloatArray) -> list:
     if not shares:
         return []
     top = max(share for _, share in shares)
-    return sorted(shares, key=lambda item: (item[1] < top * (1.0 - TIE), -item[1], item[0]))
+
+    def order(item: tuple) -> tuple:
+        tied = item[1] >= top * (1.0 - TIE)         # ties with the largest: joint order
+        return (not tied, 0.0 if tied else -item[1], item[0])
+    return sorted(shares, key=order)
 
 
 def other_motion(mech: MechanismLike, basis: FloatArray, spins: list) -> 'str | None':
@@ -365,15 +381,18 @@ def picks(mech: MechanismLike, spins: list, basis: FloatArray) -> list:
     return out
 
 
-def _choose(mech: MechanismLike, spins: list, basis: FloatArray) -> tuple[list, list]:
-    """(joint indices, assembly notes): one joint per spin (:func:`picks`)."""
-    chosen, notes = [], []
+def _choose(mech: MechanismLike, spins: list, basis: FloatArray) -> tuple[list, list, list]:
+    """(joint indices, assembly notes, records): one joint per spin (:func:`picks`)."""
+    chosen, notes, records = [], [], []
     for spin, j in zip(spins, picks(mech, spins, basis)):
         if j is None:
             continue
         chosen.append(j)
+        records.append(record(mech, spin, j))
         share = dict(spin.shares)[j]
-        text = (f'{_what(mech, spin)} spins freely about its own axis ({_ends(spin)}); '
+        one = len(spin.links) <= 1
+        text = (f'{_what(mech, spin)} {"spins" if one else "spin"} freely about '
+                f'{"its" if one else "their"} own axis ({_ends(spin)}); '
                 f"mechanism.idle_spins: lock locked joint '{mech.joints[j]}' at "
                 f'{mech.assembled_positions[j]:.9g} (its share of the spin {share:.3g}, the '
                 f'largest'
@@ -385,11 +404,11 @@ def _choose(mech: MechanismLike, spins: list, basis: FloatArray) -> tuple[list, 
                      f'which joint is locked changes the torques: lock the joint that is '
                      f'locked in the real mechanism (mechanism.locked_joints)')
         notes.append(text)
-    return chosen, notes
+    return chosen, notes, records
 
 
 def _ends(spin: Spin) -> str:
-    return 'the line through its joints ' + ', '.join(spin.ends) if spin.ends else 'no joint'
+    return 'the line through the joints ' + ', '.join(spin.ends) if spin.ends else 'no joint'
 
 
 def _names(mech: MechanismLike, shares: list, skip: 'int | None' = None) -> str:

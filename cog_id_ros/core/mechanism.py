@@ -45,7 +45,7 @@ MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joi
                   'found_at_assembly', 'assembly')
 LINK_KEYS = ('mass', 'com', 'inertia')
 JOINT_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy',
-              'axis', 'axis2', 'lower', 'upper', 'effort') + couplings.KEYS
+              'axis', 'axis2') + couplings.KEYS + ('lower', 'upper', 'effort')
 
 DEFAULT_SETPOINT_TOLERANCE = 1e-3      # rad or m: larger redundant disagreements are rejected
 DEFAULT_MAX_CONDITION_NUMBER = 1e6     # closure Jacobian (passive joints), Frobenius norm
@@ -56,6 +56,9 @@ DEFAULT_CLOSURE_TOLERANCE = 1e-10      # m or rad: a loop counts as closed below
 MAX_LENGTH = 1e6            # m: every entry of com, parent_xyz, child_xyz
 MAX_COORDINATE = 1e6        # rad or m: initial_positions, parent_rpy, child_rpy
 MAX_MASS = 1e9              # kg
+#: a link this many times heavier than the median link, and heavier than HEAVY kg, is
+#: reported at load: most likely a density or unit mistake in the model (a CAD export)
+HEAVIER, HEAVY = 1e4, 1e3
 MAX_INERTIA = 1e12          # kg m^2: every inertia entry
 MAX_GRAVITY = 1e4           # m/s^2: length of the gravity vector
 MIN_TORQUE_WEIGHT, MAX_TORQUE_WEIGHT = 1e-9, 1e9
@@ -93,6 +96,9 @@ class Mechanism:
     locked_joints: list
     locked_index: list
     idle_spins: str
+    #: read by couplings.read_couplings: (follower, leader, multiplier, offset) per coupled
+    #: joint (joints.<name>.mimic)
+    couplings: list
 
     def __init__(self, params: Mapping[str, Any], _chains: Iterable[SphericalChain] = ()) -> None:
         reader = ParameterReader(params)
@@ -105,7 +111,7 @@ class Mechanism:
         self._read_links(reader)
         self._read_joints(reader)
         self._read_positions(reader)
-        self._read_couplings(reader)
+        couplings.read_couplings(self, reader, MAX_COORDINATE)
         idle_spins.read_locks(self, reader)
         self._reject_unknown(reader)
         self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs, [
@@ -221,6 +227,15 @@ class Mechanism:
                 prefix + 'com', r.vector(prefix + 'com', 3, default=(0.0, 0.0, 0.0)),
                 MAX_LENGTH, 'm'))
             self.link_inertia.append(_inertia(r, prefix + 'inertia'))
+        masses = sorted(m for m in self.link_mass if m > 0.0)
+        median = masses[len(masses) // 2] if masses else 0.0
+        for link, mass in zip(self.links, self.link_mass):
+            if mass > HEAVY and mass > HEAVIER * median:
+                assembly.note(self, f"link '{link}' weighs {mass:.4g} kg, {mass / median:.3g} "
+                                    f'times the median link ({median:.4g} kg): most likely a '
+                                    f'density or unit mistake in the model (links.{link}.mass, '
+                                    f"or the URDF's <inertial>); its weight dominates every "
+                                    f'torque')
 
     def _read_joints(self, r: ParameterReader) -> None:
         """Every joint of mechanism.joints, read by its kind (joints.py): those with a
@@ -318,31 +333,6 @@ class Mechanism:
                                   enumerate(self.active_position_limits)
                                   if lo > -math.inf or hi < math.inf]
 
-    def _read_couplings(self, r: ParameterReader) -> None:
-        """``couplings``: (follower, leader, multiplier, offset) of every joint that
-        ``joints.<name>.mimic`` couples to another (couplings.py)."""
-        self.couplings: list[tuple[str, str, float, float]] = []
-        for spec in self.joint_specs + self.closure_specs:
-            prefix = f'joints.{spec.name}.'
-            leader = r.string(prefix + 'mimic')
-            if leader is None:
-                continue
-            if not spec.kind.has_coordinate:
-                raise MechanismConfigError(
-                    prefix + 'mimic', f'a {spec.kind.name} joint has no coordinate to couple '
-                                      f'(only revolute and prismatic joints can mimic)')
-            if leader not in self.joints:
-                raise MechanismConfigError(
-                    prefix + 'mimic', f"'{leader}' is not a revolute or prismatic joint of "
-                                      f'mechanism.joints')
-            if leader == spec.name:
-                raise MechanismConfigError(prefix + 'mimic', 'a joint cannot mimic itself')
-            multiplier = r.number(prefix + 'mimic_multiplier', default=1.0)
-            offset = r.number(prefix + 'mimic_offset', default=0.0)
-            bounded(prefix + 'mimic_multiplier', (multiplier,), MAX_COORDINATE, '')
-            bounded(prefix + 'mimic_offset', (offset,), MAX_COORDINATE, 'rad or m')
-            self.couplings.append((spec.name, leader, multiplier, offset))
-
     def _reject_unknown(self, r: ParameterReader) -> None:
         for name in r.unused('mechanism.'):
             raise MechanismConfigError(
@@ -398,6 +388,20 @@ class Mechanism:
         self.spherical_chains, self.solver_mechanism = chains, solver
         self._readout = spherical_chains.JointReadout(self, solver)
 
+    def settled_parameters(self) -> dict[str, Any]:
+        """The parameters of this mechanism with its assembled pose pinned: every joint's
+        position given (where the assembly found it), the joints it locked named. A
+        Mechanism made from them is this one without the search at load (another process's
+        copy, the node's trajectory worker)."""
+        params = dict(self.parameters)
+        for name in ('mechanism.found_at_assembly', 'mechanism.assembly',
+                     'mechanism.idle_spins'):
+            params.pop(name, None)
+        params['mechanism.initial_positions'] = [float(x) for x in self.assembled_positions]
+        if self.locked_joints:
+            params['mechanism.locked_joints'] = list(self.locked_joints)
+        return params
+
     def joints_at(self, coordinates: Any,
                   rates: Any = None) -> tuple[FloatArray, FloatArray | None]:
         """(positions, rates or None) of ``joints`` from the coordinates of
@@ -430,18 +434,20 @@ class Mechanism:
         locked (idle_spins.py), held where the first assembly put them (or at their
         initial positions where those were given). The closure Jacobian at the assembled
         pose."""
-        #: True once idle_spins: lock has locked joints of its own choice
+        #: True once idle_spins: lock has locked joints of its own choice; what spun, and
+        #: which joint was locked for each (idle_spins.record)
         self.spins_locked = False
+        self.idle_spin_sets: list[dict] = []
         notes: list[str] = []
         start = None
         while True:
-            q, moved, problem = assembly.assemble(self, start)
+            q, moved, problem = assembly.assemble(self, start, settled=start is not None)
             self._assembled(q)
             try:
                 matrix, self.closure_rank, self.dof = degrees_of_freedom.count(
                     self, moved, problem)
             except idle_spins.LockThem as lock:
-                self.spins_locked, notes = True, lock.notes
+                self.spins_locked, notes, self.idle_spin_sets = True, lock.notes, lock.spins
                 self.locked_joints = self.locked_joints + [self.joints[j] for j in lock.joints]
                 self.locked_index = sorted(self.locked_index + lock.joints)
                 start = [q[j] if j in self.found_index or j >= len(self.joints) else

@@ -45,7 +45,7 @@ class NodeConfig:
             defaults['joint_states_decimation'] = 0     # the robot publishes joint_states
         values = node.declare_table(table, overrides, active_types, defaults)
         wraps = [kind.wraps for kind in mechanism.active_kinds]
-        return cls(mechanism=dict(mechanism.parameters),
+        return cls(mechanism=mechanism.settled_parameters(),
                    active_joints=tuple(mechanism.active_joints),
                    unwrap=[values.get('unwrap_angles', False) and w for w in wraps],
                    values=values)
@@ -80,7 +80,8 @@ def start_up_summary(mechanism: Any, config: NodeConfig) -> str:
     limits = ', '.join(f'{j} {lim:g}' for j, lim in zip(config.active_joints,
                                                          config.effort_limits))
     return (f"mechanism '{mechanism.name}': {len(mechanism.links)} links, "
-            f"{len(mechanism.joints)} joints, {mechanism.dof} DOF, active joints "
+            f"{len(mechanism.joints)} joints, {mechanism.dof} DOF, base link "
+            f"'{mechanism.base_link}' held fixed, active joints "
             f"{', '.join(config.active_joints)}{' (redundant)' if mechanism.is_redundant else ''}"
             f'; effort limits: {limits}; setpoint timeout {config.setpoint_timeout:g} s '
             f'({config.timeout_behavior})'
