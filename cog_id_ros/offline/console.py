@@ -22,10 +22,11 @@ EXIT_BROKEN_PIPE = 141  # stdout closed before the summary was printed (outputs 
 
 
 class ToolError(Exception):
-    """An error the tool reports as one line, with its exit status."""
+    """An error the tool reports as one line, with its exit status (and, for a parameter
+    file that cannot be honoured, the parameter it names)."""
 
-    def __init__(self, message, status):
-        self.status = status
+    def __init__(self, message, status, parameter=None):
+        self.status, self.parameter = status, parameter
         super().__init__(message)
 
 
@@ -63,19 +64,22 @@ def positive_float(text):
     return value
 
 
-def load_mechanism(args, solver=True):
+def load_mechanism(args, solver=True, overrides=None):
     """(Mechanism, InverseDynamics) of the parameter file, node name and backend the command
-    line gave (without ``solver``: (Mechanism, None)); ToolError (exit EXIT_PARAMS) saying
-    why it cannot be used."""
+    line gave (without ``solver``: (Mechanism, None)), the parameters ``overrides`` (dotted
+    names) changed; ToolError (exit EXIT_PARAMS) saying why it cannot be used."""
     import cog_id_ros
+
+    from ..description.params_file import DEFAULT_NODE_NAME, load_params_file
     try:
-        if args.node_name is None:
-            mech = cog_id_ros.Mechanism.from_params_file(args.params_file)
-        else:
-            mech = cog_id_ros.Mechanism.from_params_file(args.params_file, args.node_name)
+        params = load_params_file(args.params_file, args.node_name or DEFAULT_NODE_NAME)
+        params.update(overrides or {})
+        mech = cog_id_ros.Mechanism.from_parameters(
+            params, base_dir=os.path.dirname(os.path.abspath(args.params_file)))
         return mech, (cog_id_ros.InverseDynamics(mech, backend=args.backend) if solver else None)
     except cog_id_ros.CogIdError as exc:
-        raise ToolError(f'{args.params_file}: {one_line(exc)}', EXIT_PARAMS) from None
+        raise ToolError(f'{args.params_file}: {one_line(exc)}', EXIT_PARAMS,
+                        getattr(exc, 'parameter', None)) from None
     except OSError as exc:
         raise ToolError(f'{args.params_file}: cannot read: {exc.strerror or exc}',
                         EXIT_PARAMS) from None

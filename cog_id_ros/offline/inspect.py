@@ -63,7 +63,9 @@ exit status:
   {EXIT_OK}  success (also with warnings)
   {EXIT_INPUT}  the --trajectory CSV was rejected (one line names the row and column)
   {EXIT_USAGE}  command line, or a parameter file that cannot be read or honoured (one line
-     naming the parameter)
+     naming the parameter). A mechanism refused for idle spins (rods that spin about their
+     own axes: mechanism.locked_joints) is still reported and drawn as it loads with
+     idle_spins: lock, the spinning sets and the joints that would be locked marked
   {EXIT_WRITE}  the picture cannot be written
   {EXIT_INTERNAL} an internal error (a bug; {TRACEBACK_ENV}=1 shows the traceback)
   130 Ctrl-C (143 SIGTERM, 129 SIGHUP): no picture written
@@ -112,10 +114,15 @@ def main(argv: 'list[str] | None' = None) -> int:
 
 def run(args, stdout, stderr):
     plot_format = _check_plot_path(args)
-    mech, solver = load(args)
+    mech, solver, refused = load(args)
     evaluation = solver.evaluate([mech.assembled_positions[j] for j in mech.active_index],
                                  on_invalid='skip')
     text = format_report(mech, evaluation, args.params_file)
+    if refused is not None:
+        text = (f'REFUSED as written for its idle spins (mechanism.locked_joints: what to '
+                f'write is on stderr; exit status {EXIT_USAGE}). Shown as it loads with '
+                f'idle_spins: lock, the spinning sets and the joints it locks marked:\n\n'
+                + text)
     motion = None
     if args.trajectory:
         motion = solve_trajectory(mech, solver, args.trajectory, args.snapshots, stderr)
@@ -130,6 +137,8 @@ def run(args, stdout, stderr):
         raise BrokenPipeError('stdout is closed')
     stdout.write(text + '\n')
     stdout.flush()
+    if refused is not None:
+        raise ToolError(refused, EXIT_USAGE)
     return EXIT_OK
 
 
@@ -158,9 +167,11 @@ def solve_trajectory(mech, solver, path, n_snapshots, stderr):
 
 
 def load(args):
-    """(Mechanism, InverseDynamics) of --params-file; ToolError (exit 2) naming the
-    parameter. The loader's AssemblyWarnings are not printed as Python warnings: the
-    report shows them (``assembly_warnings``)."""
+    """(Mechanism, InverseDynamics, refusal or None) of --params-file; ToolError (exit 2)
+    naming the parameter. A mechanism refused for its idle spins is loaded again with
+    ``idle_spins: lock`` to show them (the refusal is returned, and the exit status is
+    still 2). The loader's AssemblyWarnings are not printed as Python warnings: the report
+    shows them (``assembly_warnings``)."""
     from ..core.mechanism import AssemblyWarning
     if not os.path.isfile(args.params_file):
         what = 'no such file' if not os.path.exists(args.params_file) else 'not a regular file'
@@ -170,9 +181,16 @@ def load(args):
     with warnings.catch_warnings():
         warnings.simplefilter('ignore', AssemblyWarning)
         try:
-            return load_mechanism(loading)
+            return (*load_mechanism(loading), None)
         except ToolError as exc:
-            raise ToolError(str(exc), EXIT_USAGE) from None
+            if exc.parameter != 'mechanism.locked_joints':
+                raise ToolError(str(exc), EXIT_USAGE) from None
+            refused = str(exc)
+        try:
+            return (*load_mechanism(loading, overrides={'mechanism.idle_spins': 'lock'}),
+                    refused)
+        except ToolError:
+            raise ToolError(refused, EXIT_USAGE) from None
 
 
 def _check_plot_path(args):

@@ -16,18 +16,23 @@ TINY = 1e-12
 def joint_rows(mech):
     """Per joint with a coordinate: (name, type, role, given, assembled, unit, warning or
     None); role is 'active', 'active, redundant', 'locked' or 'passive' (', closes loop k'
-    added)."""
+    added); given is None where the assembly found the position (none was given)."""
     closing = {lp.joint: k for k, lp in enumerate(mech.model.loops, start=1)
                if lp.joint is not None}
     primary = set(mech.primary_joints)
     rows = []
+    found = set(getattr(mech, 'found_index', ()))
     for j, name in enumerate(mech.joints):
         given, assembled = mech.initial_positions[j], mech.assembled_positions[j]
         kind = mech.joint_types[j]
         unit = mech.joint_specs[j].kind.unit
         moved = abs(assembled - given)
         warning = None
-        if j in mech.active_index:
+        if j in found:
+            role = ('active' if j in primary else 'active, redundant') \
+                if j in mech.active_index else 'locked' if j in mech.locked_index else 'passive'
+            given = None
+        elif j in mech.active_index:
             role = 'active' if j in primary else 'active, redundant'
             if assembled != given:
                 warning = (f"active joint '{name}' moved from {given:.9g} to {assembled:.9g} "
@@ -74,12 +79,13 @@ def format_joint_table(mech):
     header = ('joint', 'type', 'role', 'given', 'assembled', 'difference', 'unit')
     table = [header]
     for name, kind, role, given, assembled, unit, warning in rows:
-        table.append((name + (' !' if warning else ''), kind, role, _value(given),
-                      _value(assembled), _signed(assembled - given), unit))
+        table.append((name + (' !' if warning else ''), kind, role,
+                      'found' if given is None else _value(given), _value(assembled),
+                      '-' if given is None else _signed(assembled - given), unit))
     table += closure_rows(mech)
     widths = [max(len(r[i]) for r in table) for i in range(len(header))]
-    lines = ['joints (given: initial_positions; assembled: where the loader closed the loops, '
-             'actuators held):']
+    lines = ['joints (given: initial_positions, or found where the loader looked for it; '
+             'assembled: where the loader closed the loops):']
     lines += ['  ' + '  '.join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in table]
     warned = [row for row in rows if row[-1]]
     for row in warned:
@@ -92,15 +98,31 @@ def format_joint_table(mech):
             f"mean, set initial_positions near that pose: {', '.join(far)}, and the other "
             f"passive joints of their loops.", WIDTH,
             initial_indent='  ', subsequent_indent='  ')
-    if not warned:
+    if not warned and all(row[3] is None for row in rows):
+        lines.append('every position was found by the assembly (none given)')
+    elif not warned:
         lines.append(f'no joint moved far at assembly ({_far_text(mech)}): the pose is the one '
                      f'initial_positions points at')
+    if any(row[3] is None for row in rows):
+        lines.append('the assembled pose, to start from it at every load whatever the loader '
+                     'does (one line to paste under `mechanism:`):')
+        lines.append('  ' + pose_block(mech).strip('`'))
     notes = list(mech.assembly_warnings)
     if notes:
         lines.append('the loader said (mechanism.assembly_warnings):')
         for note in notes:
             lines += textwrap.wrap(note, WIDTH, initial_indent='  - ', subsequent_indent='    ')
     return lines
+
+
+def pose_block(mech):
+    """The assembled pose as an initial_positions entry to paste: a mapping for the URDF
+    form (whose reader names the joints it left to the assembly), else a list."""
+    from ..core import assembly
+    pose = assembly.pose_block(mech, mech.assembled_positions)
+    if 'mechanism.found_at_assembly' in mech.parameters:
+        return assembly.mapping_block(pose)
+    return assembly.native_block(pose)
 
 
 def _value(value):

@@ -39,7 +39,9 @@ def format_header(mech, params_file):
     return [f'{mech.name}  ({params_file})',
             f'  {len(mech.links)} moving links ({mass:.6g} kg), {len(kinds)} joints ({by_kind}), '
             f"{loops} loop{'' if loops == 1 else 's'}, {mech.dof} DOF; gravity "
-            f"[{', '.join(f'{g:g}' for g in mech.gravity)}] m/s^2"]
+            f"[{', '.join(f'{g:g}' for g in mech.gravity)}] m/s^2",
+            f"  base link '{mech.base_link}' held fixed to the world (a fixed base: a robot "
+            f'that floats or stands on its feet is held by it here)']
 
 
 def tree_hops(mech):
@@ -195,6 +197,7 @@ def format_actuation(mech):
         lines += textwrap.wrap(f"locked joints (held at their initial positions): "
                                f"{', '.join(mech.locked_joints)}", WIDTH,
                                initial_indent='  ', subsequent_indent='    ')
+    lines += format_idle_spins(mech)
     lines += format_spherical_chains(mech)
     if mech.is_redundant:
         lines.append(f'active joints: {n_active} for {mech.dof} DOF (redundant); the torques '
@@ -208,6 +211,22 @@ def format_actuation(mech):
     else:
         lines.append(f"active joints: {', '.join(mech.active_joints)} "
                      f"({'all primary' if n_active > 1 else 'primary'}; not redundant)")
+    return lines
+
+
+def format_idle_spins(mech):
+    """The idle spins idle_spins: lock took out: per spin, what spins, about which joints,
+    the joint locked and the others that could have been."""
+    spins = getattr(mech, 'idle_spin_sets', [])
+    if not spins:
+        return []
+    lines = [f'idle spins (mechanism.idle_spins: lock): {len(spins)}, one joint locked each']
+    for spin in spins:
+        what = ', '.join(spin['links']) or 'massless links ' + ', '.join(spin['moving'])
+        text = (f"{what}: spins about the line through {', '.join(spin['ends'])}; locked "
+                f"{spin['locked']}" + (f" (could be: {', '.join(spin['others'])})"
+                                       if spin['others'] else ''))
+        lines += textwrap.wrap(text, WIDTH, initial_indent='  ', subsequent_indent='    ')
     return lines
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from ..core import joints
 from ..core import kinematics as kin
 from ..core import spatial as sp
+from . import idle_spin_marks
 
 #: axes closer to parallel (or perpendicular) than this (sine or cosine) count as such
 PLANAR_TOLERANCE = 1e-6
@@ -271,10 +272,11 @@ def mechanism_figure(mech, q, snapshots=(), title=None, subtitle=None, warning=N
     _draw_links(view, pose, colors)
     _draw_cogs(view, pose, colors)
     _draw_joints(view, pose)
+    idle_spin_marks.draw(view, pose, mech)
     labels = _label(view, mech, pose, colors)
     view.finish([pose.all_points()] + [g.all_points() for _, g in ghosts]
                 + [pose.base_points])
-    handles = _legend_handles(mech, pose, ghosts)
+    handles = _legend_handles(mech, pose, ghosts) + idle_spin_marks.legend(mech)
     fig.legend(handles=handles, loc='outside lower center', ncols=3, fontsize=8)
     loops = len(mech.model.loops)
     heading = title or (f"{mech.name}: {mech.dof} DOF, {len(mech.links)} links, {loops} "
