@@ -4,17 +4,23 @@ TEST ORACLE ONLY; never imports cog_id_ros. Pinocchio's own URDF parser (urdfdom
 tree; the file's joint edits are made as the loader of LAAS's example-parallel-robots makes
 them (``SPHERICAL``: the joint model replaced by ``JointModelSpherical`` at the same
 placement; ``FIXED``: the joint locked at the neutral configuration by
-``buildReducedModel``); ``UJOINT_*`` edits are not made here: a test gives the oracle the
-URDF with the two revolute joints and the massless link written out. Each frame pair of
-``closed_loop`` is a constraint between Pinocchio frames of those names: ``6d``,
-``log6(oMa^-1 oMb) = 0``; ``3d``, their origins coincide.
+``buildReducedModel``; ``UJOINT_<A><B>``: two joints ``JointModelR<A>`` at the joint's
+placement, named ``<joint>_<A>``, then ``JointModelR<B>`` at the identity, ``<joint>_<B>``,
+carrying the body and the frames). Each frame pair of ``closed_loop`` is a constraint
+between Pinocchio frames of those names: ``6d``, ``log6(oMa^-1 oMb) = 0``; ``3d``, their
+origins coincide. A URDF ``<mimic>`` (Pinocchio's parser makes the follower a joint of its
+own) is one more constraint row, ``q_f - m q_l - o = 0``, read from the URDF text here.
+``held`` joints are held like actuators that do not move (a locked joint).
 
 Dynamics as in test/pinocchio_reference.py, with Pinocchio's velocities (nv) instead of the
 file's coordinates: V = null space of the constraint velocity Jacobian, qd = V z from the
 active velocities, qdd = particular + V zdd, RNEA torques of the tree, and the active
-torques tau with V_a^T tau = V^T tau_tree.
+torques tau with V_a^T tau = V^T tau_tree: the least-norm such tau where the actuators are
+redundant (more than the freedoms; unit weights).
 """
 from __future__ import annotations
+
+import xml.etree.ElementTree as ElementTree
 
 import numpy as np
 import pytest
@@ -36,34 +42,57 @@ def _null_space(a, rtol=1e-9):
     return vt[rank:].T.copy()
 
 
+_AXES = {'X': 'RX', 'Y': 'RY', 'Z': 'RZ'}
+
+
 def _edited(model, edits):
-    """The model with the loader's SPHERICAL and FIXED edits made."""
+    """The model with the loader's SPHERICAL, FIXED and UJOINT_<A><B> edits made."""
     if not edits:
         return model
     new, locked = pin.Model(), []
     new.gravity = model.gravity
-    for place, inertia, name, parent, joint in list(zip(
+    renamed = {}         # old joint id -> the new joint that carries its body and frames
+    for old_id, (place, inertia, name, parent, joint) in list(enumerate(zip(
             model.jointPlacements, model.inertias, model.names, model.parents,
-            model.joints))[1:]:
+            model.joints)))[1:]:
         kind = edits.get(name, '').upper()
-        jm = pin.JointModelSpherical() if kind == 'SPHERICAL' else joint
-        jid = new.addJoint(parent, jm, place, name)
+        parent_id = renamed.get(parent, 0)
+        if kind.startswith('UJOINT_'):
+            first = getattr(pin, f'JointModel{_AXES[kind[7]]}')()
+            second = getattr(pin, f'JointModel{_AXES[kind[8]]}')()
+            middle = new.addJoint(parent_id, first, place, f'{name}_{kind[7]}')
+            jid = new.addJoint(middle, second, pin.SE3.Identity(), f'{name}_{kind[8]}')
+        else:
+            jm = pin.JointModelSpherical() if kind == 'SPHERICAL' else joint
+            jid = new.addJoint(parent_id, jm, place, name)
+        renamed[old_id] = jid
         new.appendBodyToJoint(jid, inertia, pin.SE3.Identity())
         if kind == 'FIXED':
             locked.append(jid)
     for frame in list(model.frames)[1:]:
-        new.addFrame(pin.Frame(frame.name, frame.parentJoint, frame.placement, frame.type),
-                     False)
+        new.addFrame(pin.Frame(frame.name, renamed.get(frame.parentJoint, 0), frame.placement,
+                               frame.type), False)
     if locked:
         new = pin.buildReducedModel(new, locked, pin.neutral(new))
     return new
+
+
+def _mimics(urdf):
+    """(follower, leader, multiplier, offset) of every <mimic> of the URDF text."""
+    out = []
+    for joint in ElementTree.fromstring(urdf).iter('joint'):
+        tag = joint.find('mimic')
+        if tag is not None:
+            out.append((joint.get('name'), tag.get('joint'),
+                        float(tag.get('multiplier', 1.0)), float(tag.get('offset', 0.0))))
+    return out
 
 
 class LoopOracle:
     """Pinocchio model of ``urdf`` (text) with the loops of ``loops`` (the loop-closure
     file's text) and active joints ``active`` (default: its name_mot)."""
 
-    def __init__(self, urdf, loops, gravity=(0.0, 0.0, -9.81), active=None):
+    def __init__(self, urdf, loops, gravity=(0.0, 0.0, -9.81), active=None, held=()):
         spec = yaml.safe_load(loops)
         model = pin.buildModelFromXML(urdf)
         model.gravity.linear = np.array(gravity, dtype=float)
@@ -74,8 +103,12 @@ class LoopOracle:
                       for (a, b), kind in zip(spec['closed_loop'], spec['type'])]
         for a, b, _ in self.pairs:
             assert a < self.model.nframes and b < self.model.nframes
+        self.mimics = [(self.v_index(f), self.v_index(lead), m, o)
+                       for f, lead, m, o in _mimics(urdf)]
         self.active = list(active if active is not None else spec['name_mot'])
+        self.held = list(held)
         self.ia = [self.v_index(name) for name in self.active]
+        self.ih = [self.v_index(name) for name in self.held]
 
     def v_index(self, name):
         joint = self.model.joints[self.model.getJointId(name)]
@@ -106,7 +139,20 @@ class LoopOracle:
             ma, mb = self.data.oMf[a], self.data.oMf[b]
             rows.append(pin.log6(ma.actInv(mb)).vector if kind == '6d'
                         else mb.translation - ma.translation)
+        rows.append(np.array([q[self._q(f)] - m * q[self._q(lead)] - o
+                              for f, lead, m, o in self.mimics]))
         return np.concatenate(rows)
+
+    def _q(self, v):
+        """The configuration index of a one-coordinate joint's velocity index."""
+        joint = next(j for j in self.model.joints[1:] if j.idx_v == v)
+        return joint.idx_q
+
+    def _mimic_rows(self):
+        rows = np.zeros((len(self.mimics), self.model.nv))
+        for k, (f, lead, m, _) in enumerate(self.mimics):
+            rows[k, f], rows[k, lead] = 1.0, -m
+        return rows
 
     def _jacobian(self, frame, reference):
         return pin.getFrameJacobian(self.model, self.data, frame, reference)
@@ -123,7 +169,7 @@ class LoopOracle:
                                               @ self._jacobian(a, _LOCAL)))
             else:
                 rows.append(self._jacobian(b, _ALIGNED)[:3] - self._jacobian(a, _ALIGNED)[:3])
-        return np.vstack(rows)
+        return np.vstack(rows + [self._mimic_rows()])
 
     def velocity_jacobian(self, q):
         """Rows of the constraints on velocities: the relative twist (6d, world frame) or
@@ -136,7 +182,7 @@ class LoopOracle:
                 rows.append(self._jacobian(b, _WORLD) - self._jacobian(a, _WORLD))
             else:
                 rows.append(self._jacobian(b, _ALIGNED)[:3] - self._jacobian(a, _ALIGNED)[:3])
-        return np.vstack(rows)
+        return np.vstack(rows + [self._mimic_rows()])
 
     def drift(self, q, v):
         pin.forwardKinematics(self.model, self.data, q, v, np.zeros(self.model.nv))
@@ -152,12 +198,13 @@ class LoopOracle:
                     pin.getFrameClassicalAcceleration(self.model, self.data, b, _ALIGNED).linear
                     - pin.getFrameClassicalAcceleration(self.model, self.data, a, _ALIGNED
                                                         ).linear)
+        rows.append(np.zeros(len(self.mimics)))
         return np.concatenate(rows)
 
     def close(self, q, tol=1e-12, iterations=30):
         """q with the loops closed, the active joints held (Gauss-Newton; the last
         iterations only polish rounding)."""
-        free = [k for k in range(self.model.nv) if k not in self.ia]
+        free = [k for k in range(self.model.nv) if k not in self.ia + self.ih]
         for k in range(iterations):
             r = self.residual(q)
             if np.linalg.norm(r) < tol or k > 10 and np.linalg.norm(r) < 1e3 * tol:
@@ -170,14 +217,19 @@ class LoopOracle:
 
     # ------------------------------------------------------------------ dynamics
     def torques(self, q, qd_active, qdd_active):
-        """(tau of the active joints, qd, qdd) at the closed pose q."""
+        """(tau of the active joints, qd, qdd) at the closed pose q, the held joints still
+        (one constraint row each). Redundant actuators: the least-norm tau (unit weights)."""
         jac = self.velocity_jacobian(q)
-        basis = _null_space(jac)
+        held = np.zeros((len(self.ih), self.model.nv))
+        held[np.arange(len(self.ih)), self.ih] = 1.0
+        basis = _null_space(np.vstack([jac, held]))
         va = basis[self.ia]
-        assert basis.shape[1] == len(self.ia), 'the oracle expects one actuator per freedom'
-        v = basis @ np.linalg.solve(va, np.asarray(qd_active, dtype=float))
-        particular = -np.linalg.lstsq(jac, self.drift(q, v), rcond=1e-10)[0]
-        a = particular + basis @ np.linalg.solve(
-            va, np.asarray(qdd_active, dtype=float) - particular[self.ia])
+        assert np.linalg.matrix_rank(va) == basis.shape[1], 'the actuators do not determine it'
+        v = basis @ np.linalg.lstsq(va, np.asarray(qd_active, dtype=float), rcond=None)[0]
+        drift = np.concatenate([self.drift(q, v), np.zeros(len(self.ih))])
+        particular = -np.linalg.lstsq(np.vstack([jac, held]), drift, rcond=1e-10)[0]
+        a = particular + basis @ np.linalg.lstsq(
+            va, np.asarray(qdd_active, dtype=float) - particular[self.ia], rcond=None)[0]
         tau_tree = pin.rnea(self.model, self.data, q, v, a)
-        return np.linalg.solve(va.T, basis.T @ tau_tree), v, a
+        tau = va @ np.linalg.solve(va.T @ va, basis.T @ tau_tree)   # least norm
+        return tau, v, a

@@ -65,6 +65,14 @@ DRIVERS = {
     'crank_rocker_urdf.yaml': {'crank_joint': _law(PI / 2, 2 * PI)},   # two turns in 2 s
     'five_bar_robot.yaml': {'motor/1': _law(0.0, 0.0, [(0.3, 0.0, PI)]),
                             'motor/2': _law(0.0, 0.0, [(0.2, 0.0, 2 * PI), (0.0, -0.15, PI)])},
+    # a step of the leg: hip pitch swings, the knee bends and straightens, the shin motor
+    # tilts the ankle through its rod, a little hip roll, yaw and ankle roll
+    'talos_like_leg.yaml': {'motor_hip_z': _law(0.0, 0.0, [(0.05, 0.0, PI)]),
+                            'motor_hip_x': _law(0.0, 0.0, [(0.08, 0.0, PI)]),
+                            'motor_hip_y': _law(0.0, 0.0, [(0.3, 0.0, PI)]),
+                            'motor_knee': _law(0.0, 0.0, [(0.0, 0.4, PI)]),
+                            'motor_ankle': _law(0.0, 0.0, [(0.06, 0.0, PI)]),
+                            'motor_shin': _law(0.023090923393947464, 0.0, [(0.25, 0.0, PI)])},
 }
 
 
@@ -293,4 +301,5 @@ for _twin, _original in TWINS.items():
 #: configs the oracle cannot read: the twins, and URDF descriptions
 #: (test/description/test_urdf.py and test_loop_closure_file.py check those against
 #: Pinocchio's own URDF parser)
-NOT_FOR_ORACLE = set(TWINS) | {'crank_rocker_urdf.yaml', 'five_bar_robot.yaml'}
+NOT_FOR_ORACLE = set(TWINS) | {'crank_rocker_urdf.yaml', 'five_bar_robot.yaml',
+                                'talos_like_leg.yaml'}

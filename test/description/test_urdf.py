@@ -567,13 +567,20 @@ def test_unknown_joint_type_is_refused():
     assert "joint 'crank_joint'" in str(err) and "'hinge'" in str(err)
 
 
-def test_mimic_is_refused():
+def test_mimic_is_read_as_a_coupling():
+    """<mimic> becomes the native coupling keys (core/couplings.py), with urdfdom's defaults
+    (multiplier 1, offset 0); a leader the URDF does not have is refused on its line."""
     urdf = four_bar_urdf().replace(
         '<axis xyz="0 0 1"/><limit lower="-6" upper="6" effort="0" velocity="1.0"/></joint>',
         '<axis xyz="0 0 1"/><limit lower="-6" upper="6" effort="0" velocity="1.0"/>'
         '<mimic joint="crank_joint" multiplier="2"/></joint>', 1)
-    err = error_of(with_urdf(urdf))
-    assert "joint 'coupler_joint'" in str(err) and 'mimic' in str(err)
+    native = native_parameters(with_urdf(urdf))
+    assert native['joints.coupler_joint.mimic'] == 'crank_joint'
+    assert native['joints.coupler_joint.mimic_multiplier'] == 2.0
+    assert native['joints.coupler_joint.mimic_offset'] == 0.0
+    err = error_of(with_urdf(urdf.replace('joint="crank_joint"', 'joint="cranck_joint"')))
+    assert err.parameter == 'robot_description', str(err)
+    assert "<mimic> of joint 'coupler_joint' names 'cranck_joint'" in str(err)
 
 
 def test_any_urdf_name_loads_and_a_control_character_is_refused():
