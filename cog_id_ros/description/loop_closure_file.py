@@ -20,7 +20,9 @@ collection applies them: ``SPHERICAL``, the joint becomes a spherical joint at i
 ``<joint>_cross``. ``type`` and ``joint_type`` values are read case-insensitively.
 
 Every error is a MechanismConfigError naming ``mechanism.loop_closure_file``, the file, the
-key and the entry.
+key and the entry. The file is read as defensively as a parameter file: a regular file of
+at most MAX_FILE_CHARS, through :mod:`.yaml_guard` (no collections nested more than
+``yaml_guard.MAX_DEPTH`` deep: PyYAML's C loader crashes the process on deeper ones).
 """
 import os
 import stat
@@ -30,9 +32,10 @@ import yaml
 
 from ..core.errors import MechanismConfigError
 from ..core.parameters import show
+from . import yaml_guard
 from .frames import ZERO
 from .loop_closures import Closure
-from .params_file import MAX_FLOW_DEPTH, ParamsLoader
+from .params_file import ParamsLoader
 
 PARAMETER = 'mechanism.loop_closure_file'
 #: the keys of the file (a real file has these five; others are refused as typos)
@@ -140,14 +143,8 @@ def read_loop_file(r, base_dir: 'str | None') -> 'LoopFile | None':
     if len(text) > MAX_FILE_CHARS:
         raise MechanismConfigError(PARAMETER, f'{path} is larger than the supported '
                                               f'{MAX_FILE_CHARS // 1024} kB')
-    depth = 0
-    for char in text:           # libyaml's parser crashes on deeply nested flow collections
-        depth += 1 if char in '[{' else -1 if char in ']}' and depth else 0
-        if depth > MAX_FLOW_DEPTH:
-            raise MechanismConfigError(PARAMETER, f'{path} nests [...] more than '
-                                                  f'{MAX_FLOW_DEPTH} deep')
     try:
-        data = yaml.load(text, Loader=ParamsLoader)    # noqa: S506 (a safe loader)
+        data = yaml_guard.load(text, ParamsLoader, PARAMETER, path)
     except (yaml.YAMLError, RecursionError, ValueError, OverflowError) as exc:
         raise MechanismConfigError(PARAMETER, f'{path} is not valid YAML: {exc}') from None
     if not isinstance(data, dict):

@@ -10,10 +10,11 @@ The file is read as strictly as rcl reads it (numbers as rcl reads them: floats 
 written without a dot, and 1_0 or 1:30 are text, not numbers; a key written twice is an
 error here, where rcl lets the last one win) and defensively: only
 regular files of at most ``MAX_FILE_CHARS`` (not counting a ``robot_description``, which
-the URDF reader bounds), no FIFOs, no deeply nested flow collections,
-no recursive aliases. An array rcl's parser refuses makes the file an error here too,
-naming the parameter (:func:`rcl_value_problem`: an array that mixes integers and doubles,
-``[0, -9.81, 0]``, or other types), in any node entry, as rcl refuses the whole file:
+the URDF reader bounds), no FIFOs, no collections nested more than
+``yaml_guard.MAX_DEPTH`` deep (:mod:`.yaml_guard`, which every YAML the package reads
+goes through), no recursive aliases. An array rcl's parser refuses makes the file an error
+here too, naming the parameter (:func:`rcl_value_problem`: an array that mixes integers
+and doubles, ``[0, -9.81, 0]``, or other types), in any node entry, as rcl refuses the whole file:
 cog_id_node and the API accept the same files (the node checks its ``--params-file``s with
 :func:`check_rcl_values` before rcl reads them). Only files: a dict given to
 ``Mechanism.from_parameters`` may mix integers and floats freely. Whatever the file holds,
@@ -29,6 +30,7 @@ import yaml
 
 from ..core.errors import MechanismConfigError
 from ..core.parameters import flatten, show
+from . import yaml_guard
 from .urdf_xml import MAX_URDF_SIZE
 
 #: the node entry read when none is named (the node's default name)
@@ -44,12 +46,9 @@ MAX_FILE_CHARS = 512 * 1024
 #: with room for twice the URDF limit as written in YAML (a block's indentation, a quoted
 #: string's escapes), so that the URDF reader, not this one, refuses a URDF over its limit
 _MAX_READ = MAX_FILE_CHARS + 2 * MAX_URDF_SIZE
-#: deepest nesting of YAML flow collections ([...] and {...}) read; PyYAML's scanner takes
-#: time quadratic in it before its recursion gives up, and libyaml's parser crashes the
-#: process on deeply nested input (so does a line of many nested block entries, "- - - x")
-MAX_FLOW_DEPTH = 32
-_BRACKETS = re.compile(r'[\[\]{}]')
-_BLOCK_ENTRIES = re.compile(r'^[ \t]*((?:[-?:][ \t]+){33,})', re.MULTILINE)
+#: deepest nesting of YAML collections read (yaml_guard.MAX_DEPTH): PyYAML's C loader
+#: crashes the process on deeper ones
+MAX_FLOW_DEPTH = yaml_guard.MAX_DEPTH
 
 
 def _entry_matches(entry, node_name):
@@ -127,10 +126,11 @@ def read_document(path, duplicate_keys=False):
             text = stream.read(_MAX_READ + 1)
         if len(text) > _MAX_READ:
             raise _too_large(path)
-        _check_flow_depth(path, text)      # first: libyaml's parser crashes on deep nesting
-        if len(text) > MAX_FILE_CHARS and _beyond_cap(text, loader):
-            raise _too_large(path)
-        return yaml.load(text, Loader=loader)   # noqa: S506 (a safe loader)
+        if len(text) > MAX_FILE_CHARS:
+            yaml_guard.check_nesting(text, 'params_file', path)   # before it is parsed here
+            if _beyond_cap(text, loader):
+                raise _too_large(path)
+        return yaml_guard.load(text, loader, 'params_file', path)
     except MechanismConfigError:
         raise
     except OSError as exc:
@@ -258,30 +258,6 @@ def rcl_value_problem(value):
         return (f"the array mixes types ({value!r}), which ROS 2's parameter file parser "
                 'refuses: one type per array')
     return None
-
-
-def _check_flow_depth(path, text):
-    """Refuse flow collections nested deeper than MAX_FLOW_DEPTH, in one linear scan
-    (brackets inside strings and comments count too: only absurd files are refused), and
-    lines of more than MAX_FLOW_DEPTH nested block entries."""
-    deep = _BLOCK_ENTRIES.search(text)
-    if deep:
-        line = text.count('\n', 0, deep.start()) + 1
-        raise MechanismConfigError(
-            'params_file', f'{path} nests block entries ("- - - ...") more than '
-                           f'{MAX_FLOW_DEPTH} deep on line {line}; a mechanism needs none')
-    depth = 0
-    for match in _BRACKETS.finditer(text):
-        if match.group() in '[{':
-            depth += 1
-            if depth > MAX_FLOW_DEPTH:
-                line = text.count('\n', 0, match.start()) + 1
-                raise MechanismConfigError(
-                    'params_file', f'{path} nests [...] or {{...}} more than {MAX_FLOW_DEPTH} '
-                                   f'deep (line {line}); a mechanism needs one level (lists of '
-                                   f'numbers or names)')
-        else:
-            depth = max(0, depth - 1)
 
 
 _SafeBase = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)   # libyaml's parser when built

@@ -19,7 +19,7 @@ import numpy as np
 from ..core import joints
 from ..core import kinematics as kin
 from ..core import spatial as sp
-from . import idle_spin_marks
+from . import figure_text, idle_spin_marks
 
 #: axes closer to parallel (or perpendicular) than this (sine or cosine) count as such
 PLANAR_TOLERANCE = 1e-6
@@ -281,9 +281,10 @@ def mechanism_figure(mech, q, snapshots=(), title=None, subtitle=None, warning=N
     loops = len(mech.model.loops)
     heading = title or (f"{mech.name}: {mech.dof} DOF, {len(mech.links)} links, {loops} "
                         f"loop{'' if loops == 1 else 's'} ({kind}), assembled pose")
-    fig.suptitle(heading + (f'\n{subtitle}' if subtitle else ''), fontsize=11)
+    # wrapped to the figure's width: a long name or file name was cut at both edges
+    figure_text.suptitle(fig, heading + (f'\n{subtitle}' if subtitle else ''), 11)
     if warning:
-        ax.set_title(warning, color=ACTIVE_COLOR, fontsize=9)
+        figure_text.axes_title(fig, ax, warning, 9, color=ACTIVE_COLOR)
     _separate(fig, view, labels)
     return fig
 

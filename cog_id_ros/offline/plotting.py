@@ -10,6 +10,8 @@ import warnings
 
 import numpy as np
 
+from . import figure_text
+
 #: below this many samples the curve also shows the sample points
 _MARKER_LIMIT = 60
 
@@ -111,7 +113,7 @@ def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt
     head = f"{title}: actuator {' and '.join(k + 's' for k in kinds)}"
     if subtitle:
         head += '\n' + subtitle
-    fig.suptitle(head, fontsize='large')
+    figure_text.suptitle(fig, head, 12)       # 'large', wrapped to the figure's width
     fig.savefig(path, format=fmt, dpi=110)
 
 
@@ -152,7 +154,7 @@ def plot_motion(path, time, positions, joints, units, title, subtitle=None, refe
     head = f'{title}: simulated motion'
     if subtitle:
         head += '\n' + subtitle
-    fig.suptitle(head, fontsize='medium')
+    figure_text.suptitle(fig, head, 10)       # 'medium', wrapped likewise
     with warnings.catch_warnings(), np.errstate(all='ignore'):
         warnings.simplefilter('ignore', RuntimeWarning)
         fig.savefig(path, format=fmt, dpi=110)

@@ -73,7 +73,10 @@ input CSV (the output of cog_id_torques; comma-separated, header row first):
   <joint>.position  optional, every active joint or none: the first row's values are
   <joint>.velocity  the initial state (the other rows' cells are not read: empty is
                     fine); without them: initial_positions, at rest
-  Other columns are ignored with a note (an unknown joint's is an error).
+  A <name>.effort|position|velocity|acceleration column whose <name> is not a
+  joint of the mechanism is an error (a joint's name mistyped); the columns of a
+  joint that is not active, and any other column (label, <joint>.acceleration),
+  are ignored with a note, as cog_id_torques does.
 
 steps: one every --time-step from the first input time to the last (the last step
   that ends at or before it). A step within one input row's interval holds that
@@ -104,11 +107,11 @@ output CSV: time, then <joint>.position and <joint>.velocity for every joint of 
 
 exit status:
   {EXIT_OK}  success
-  {EXIT_INPUT}  an input was rejected (a missing, duplicate or unknown column, an empty
-     or non-numeric cell, NaN or infinity, time not strictly increasing, an
-     initial state that does not close the loops), or the simulation stopped (a
-     singular pose, a loop that cannot close): the line names the row, column or
-     time
+  {EXIT_INPUT}  an input was rejected (a missing or duplicate column, a column of a joint
+     the mechanism does not have, an empty or non-numeric cell, NaN or infinity, time
+     not strictly increasing, an initial state that does not close the loops), or the
+     simulation stopped (a singular pose, a loop that cannot close): the line names
+     the row, column or time
   {EXIT_USAGE}  command line: bad option, an input not readable, an output directory
      missing, an output that is a FIFO/device/socket, too many steps
   {EXIT_PARAMS}  the parameter file cannot be read or honoured
@@ -244,7 +247,7 @@ def integrate(args: argparse.Namespace, sim: 'Simulation', mech: Mechanism, traj
         if filled == block.shape[0] or k == n_steps:
             if not np.isfinite(block[:filled]).all():
                 raise ToolError(f'{args.input}: the motion left the range of a double by t = '
-                                f'{time[k]!r} s: the efforts are too large', EXIT_INPUT)
+                                f'{float(time[k])!r} s: the efforts are too large', EXIT_INPUT)
             _write_block(f, block[:filled])
             filled = 0
         if k % PROGRESS_EVERY == 0 or k == n_steps:

@@ -1,7 +1,14 @@
 """The inputs of ``cog_id_simulate``: the efforts file read (the torque tool's output
 format, :func:`read_efforts`), the effort each step holds (:func:`step_efforts`), the initial
 state (:func:`initial_state`), the reference motion (:func:`read_reference`), and the checks
-of the steps and paths; every problem a ToolError naming what to fix.
+of the steps and paths; every problem a ToolError naming what to fix, numbers in it as
+Python writes a float (``0.5``, not numpy's ``np.float64(0.5)``).
+
+Columns, as ``cog_id_torques`` reads its input: ``<name>.<field>`` with a field of the
+package's CSV formats (JOINT_FIELDS) names a joint, and an unknown ``<name>`` is an error
+(most likely a joint's name mistyped); the columns of a joint that is not active, and any
+other column (``label``, ``joint3.acceleration`` in an efforts file), are ignored with a
+note.
 """
 import argparse
 import math
@@ -20,6 +27,31 @@ PROG = 'cog_id_simulate'
 MAX_STEPS = 100_000_000
 #: an input time within this fraction of a step of a step boundary is on it
 GRID_TOLERANCE = 1e-9
+#: the fields of the package's CSV formats (trajectories, efforts, motions): a column
+#: ``<name>.<field>`` names a joint in every file the tool reads, whatever fields it uses
+JOINT_FIELDS = ('position', 'velocity', 'acceleration', EFFORT)
+
+
+def _num(x: float) -> str:
+    """A number for a message, as Python writes a float: '0.5', never 'np.float64(0.5)'."""
+    return repr(float(x))
+
+
+def read_csv(path: str, mech: Mechanism, **how: object) -> Trajectory:
+    """:func:`trajectory_io.read_trajectory` of ``path`` for ``mech`` (``how``: its
+    ``fields``, ``required``, ``first_row``), with a column ``<name>.<field>`` of any of
+    JOINT_FIELDS an error when ``<name>`` is not a joint of ``mech``, as cog_id_torques
+    refuses one (a field the tool does not read included: a typo of a joint's name);
+    TrajectoryError naming the column."""
+    joints = list(mech.joints) + list(mech.closure_joints)
+    traj = trajectory_io.read_trajectory(path, joints, list(mech.active_joints), **how)
+    for i, name in enumerate(traj.header):
+        joint, dot, field = name.rpartition('.')
+        if dot and field in JOINT_FIELDS and joint not in joints:
+            raise TrajectoryError(path, f"unknown joint '{joint}' in column {i + 1}; the "
+                                        "mechanism's joints are " + ', '.join(joints),
+                                  header=True, column=name)
+    return traj
 
 
 def step_count(time: np.ndarray, h: float) -> int:
@@ -90,8 +122,7 @@ def initial_state(args: argparse.Namespace, mech: Mechanism, traj: Trajectory, s
     active = list(mech.active_joints)
     if args.initial_state:
         try:
-            state = trajectory_io.read_trajectory(
-                args.initial_state, list(mech.joints) + list(mech.closure_joints), active)
+            state = read_csv(args.initial_state, mech)
             q, qd, _, estimated = samples.setpoints(state, active)
         except TrajectoryError as exc:
             raise ToolError(f'--initial-state {exc}', EXIT_INPUT) from None
@@ -99,9 +130,9 @@ def initial_state(args: argparse.Namespace, mech: Mechanism, traj: Trajectory, s
             raise ToolError(f'--initial-state {args.initial_state}: cannot read: '
                             f'{exc.strerror or exc}', EXIT_USAGE) from None
         if abs(state.time[0] - traj.time[0]) > GRID_TOLERANCE * args.time_step:
-            print(f'{PROG}: note: --initial-state starts at t = {state.time[0]!r} s, --input '
-                  f'at t = {traj.time[0]!r} s: the state of its first row is taken as the '
-                  'state at the first input time', file=stderr)
+            print(f'{PROG}: note: --initial-state starts at t = {_num(state.time[0])} s, '
+                  f'--input at t = {_num(traj.time[0])} s: the state of its first row is '
+                  'taken as the state at the first input time', file=stderr)
         how = 'estimated' if estimated else 'given'
         return (q[0].tolist(), qd[0].tolist(),
                 f'row 1 of {os.path.basename(args.initial_state)} (velocities {how})')
@@ -122,10 +153,8 @@ def read_efforts(args: argparse.Namespace, mech: Mechanism, stderr: TextIO
     """The efforts file: (Trajectory, efforts (N, M)); ToolError naming a bad row/column."""
     active = list(mech.active_joints)
     try:
-        traj = trajectory_io.read_trajectory(
-            args.input, list(mech.joints) + list(mech.closure_joints), active,
-            fields=(EFFORT, 'position', 'velocity'), required=EFFORT,
-            first_row=('position', 'velocity'))
+        traj = read_csv(args.input, mech, fields=(EFFORT, 'position', 'velocity'),
+                        required=EFFORT, first_row=('position', 'velocity'))
     except TrajectoryError as exc:
         hint = ''
         if exc.column and exc.column.endswith('.' + EFFORT) and exc.reason.startswith('empty'):
@@ -148,8 +177,7 @@ def read_reference(args: argparse.Namespace, mech: Mechanism, time: np.ndarray
         return None
     active = list(mech.active_joints)
     try:
-        ref = trajectory_io.read_trajectory(
-            args.reference, list(mech.joints) + list(mech.closure_joints), active)
+        ref = read_csv(args.reference, mech)
     except TrajectoryError as exc:
         raise ToolError(f'--reference {exc}', EXIT_INPUT) from None
     except OSError as exc:
@@ -158,9 +186,9 @@ def read_reference(args: argparse.Namespace, mech: Mechanism, time: np.ndarray
     tol = GRID_TOLERANCE * args.time_step
     inside = (time >= ref.time[0] - tol) & (time <= ref.time[-1] + tol)
     if not inside.any():
-        raise ToolError(f'--reference {args.reference}: its times ({ref.time[0]!r} .. '
-                        f"{ref.time[-1]!r} s) do not overlap the simulation's ({time[0]!r} .. "
-                        f'{time[-1]!r} s)', EXIT_INPUT)
+        raise ToolError(f'--reference {args.reference}: its times ({_num(ref.time[0])} .. '
+                        f"{_num(ref.time[-1])} s) do not overlap the simulation's "
+                        f'({_num(time[0])} .. {_num(time[-1])} s)', EXIT_INPUT)
     values = np.full((time.size, len(active)), np.nan)
     for k, joint in enumerate(active):
         values[inside, k] = np.interp(time[inside], ref.time,
@@ -173,14 +201,14 @@ def check_steps(args: argparse.Namespace, time: np.ndarray) -> int:
     h = args.time_step
     n_steps = step_count(time, h)
     if n_steps > MAX_STEPS:
-        raise ToolError(f'--time-step {h!r}: {n_steps:,} steps from t = {time[0]!r} to '
-                        f'{time[-1]!r} s, more than {MAX_STEPS:,}: use a larger --time-step or '
-                        'split the input', EXIT_USAGE)
+        raise ToolError(f'--time-step {_num(h)}: {n_steps:,} steps from t = {_num(time[0])} '
+                        f'to {_num(time[-1])} s, more than {MAX_STEPS:,}: use a larger '
+                        '--time-step or split the input', EXIT_USAGE)
     largest = float(max(abs(time[0]), abs(time[-1])))
     if np.spacing(largest) * 1e3 > h:
-        raise ToolError(f'--time-step {h!r}: too small for times of {largest!r} s (a double '
-                        'there is not fine enough to count steps): subtract the start time '
-                        'from the time column', EXIT_USAGE)
+        raise ToolError(f'--time-step {_num(h)}: too small for times of {_num(largest)} s (a '
+                        'double there is not fine enough to count steps): subtract the start '
+                        'time from the time column', EXIT_USAGE)
     return n_steps
 
 

@@ -1,4 +1,5 @@
-"""The command line of the package's nodes: ``--params-file`` checks and rcl's messages.
+"""The command line of the package's nodes: ``--params-file`` checks and rcl's messages,
+and the modes cog_id_node's ``--help`` lists (:func:`modes_help`).
 
 rcl refuses a params file with a message that names a line, not the parameter, and logs a
 second line of its own. These helpers say how to give parameters when none are
@@ -17,8 +18,12 @@ from typing import Any, Literal, Sequence
 import yaml
 
 from ..core import MechanismConfigError
-from ..description import params_file
+from ..description import params_file, yaml_guard
 from ..offline.console import one_line
+from .parameters import NODE_PARAMETERS
+
+#: the parameters that choose what kind of node cog_id_node is, listed by its --help
+MODE_PARAMETERS = ('control_mode', 'managed')
 
 
 def node_arguments(args: Sequence[str] | None) -> list[str]:
@@ -30,6 +35,22 @@ def wants_help(argv: Sequence[str]) -> bool:
     """``-h`` or ``--help`` before ``--ros-args``."""
     own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
     return '-h' in own or '--help' in own
+
+
+def modes_help() -> str:
+    """The lines cog_id_node's ``--help`` adds to its usage: its modes (MODE_PARAMETERS),
+    each with the values that choose it, its default and what it is, from the node's
+    parameter table (``parameters.NODE_PARAMETERS``)."""
+    lines = ['', 'Modes (-p NAME:=VALUE after --ros-args, or in the parameter file):']
+    for name in MODE_PARAMETERS:
+        param = NODE_PARAMETERS[name]
+        if param.kind == 'choice':
+            values, default = '|'.join(param.choices), param.default
+        else:                               # a bool: what turns the mode on
+            values, default = str(not param.default).lower(), str(param.default).lower()
+        what = param.ros_description.split(': ', 1)[0]
+        lines += [f'  {name}:={values}', f'      {what}; default {default}']
+    return '\n'.join(lines) + '\n'
 
 
 def split_ros_arguments(argv: Sequence[str]) -> tuple[list[str], list[str]]:
@@ -201,8 +222,8 @@ def given_value(command_line: Sequence[str] | None, node_name: str, name: str,
         elif arg in ('-p', '--param') and ':=' in rule and \
                 rule.split(':=', 1)[0].rsplit(':', 1)[-1] == name:
             try:
-                value = yaml.safe_load(rule.split(':=', 1)[1])
-            except yaml.YAMLError:
+                value = yaml_guard.load(rule.split(':=', 1)[1], yaml.SafeLoader, name, '-p')
+            except (yaml.YAMLError, MechanismConfigError):
                 pass
     return value
 
@@ -226,8 +247,8 @@ def _parameter_at_line(path: str, line: int) -> str | None:
     params file, or None."""
     try:
         with open(path, encoding='utf-8') as stream:
-            root = yaml.compose(stream)
-    except (OSError, yaml.YAMLError):
+            root = yaml_guard.compose(stream.read(), 'params_file', path)
+    except (OSError, ValueError, yaml.YAMLError, MechanismConfigError):
         return None
     best = None
 
