@@ -47,6 +47,15 @@ PYTHON_EXPRESSIONS = {
     'abs': 'abs({0})',
     'max': '({0} if {0} > {1} or {0} != {0} else {1})',     # spatial.larger: keeps a NaN
     'min': '({0} if {0} < {1} or {0} != {0} else {1})',     # spatial.smaller
+    # spatial.ScalarOps.acos: acos(min(1.0, max(-1.0, x))), a NaN taken as -1.0
+    'acos': 'acos(({0} if {0} < 1.0 else 1.0) if {0} > -1.0 else -1.0)',
+    'atan2': 'atan2({0}, {1})',
+    'mod': '{0} % {1}',
+    # ScalarOps.select(a < b, x, y) and the other comparisons (straight_line.Condition)
+    'lt_select': '({2} if {0} < {1} else {3})',
+    'le_select': '({2} if {0} <= {1} else {3})',
+    'gt_select': '({2} if {0} > {1} else {3})',
+    'ge_select': '({2} if {0} >= {1} else {3})',
 }
 
 
@@ -143,6 +152,7 @@ def python_function(name: str, params: Params, record_type: type,
     source, count = python_source(name, params, record_type.__name__, fields)
     namespace: dict[str, Any] = {
         'new': tuple.__new__, 'sin': math.sin, 'cos': math.cos, 'sqrt': math.sqrt,
+        'acos': math.acos, 'atan2': math.atan2,
         'inf': math.inf, 'nan': math.nan, record_type.__name__: record_type}
     exec(compile(source, f'<kernel {name}>', 'exec'), namespace)   # noqa: S102
     return namespace[name], source, count
@@ -174,6 +184,31 @@ C_EXPRESSIONS = {
     'abs': 'fabs({0})',
     'max': '({0} > {1} || {0} != {0} ? {0} : {1})',
     'min': '({0} < {1} || {0} != {0} ? {0} : {1})',
+    'acos': 'acos({0} > -1.0 ? ({0} < 1.0 ? {0} : 1.0) : -1.0)',
+    'atan2': 'atan2({0}, {1})',
+    'mod': 'py_mod({0}, {1})',
+    'lt_select': '({0} < {1} ? {2} : {3})',
+    'le_select': '({0} <= {1} ? {2} : {3})',
+    'gt_select': '({0} > {1} ? {2} : {3})',
+    'ge_select': '({0} >= {1} ? {2} : {3})',
+}
+
+#: C functions an expression above calls, written into a module whose kernels call them
+#: (py_mod: the lane code's divisors are nonzero constants, where Python's % would raise)
+C_FUNCTIONS = {
+    'py_mod': """/* Python's float a % b (float_rem): fmod, then the sign of b */
+static double py_mod(double a, double b)
+{
+    double mod = fmod(a, b);
+    if (mod != 0.0) {
+        if ((b < 0.0) != (mod < 0.0))
+            mod += b;
+    }
+    else
+        mod = copysign(0.0, b);
+    return mod;
+}
+""",
 }
 
 #: the C every kernel module starts with (package data beside this module): reading Python
@@ -324,11 +359,15 @@ def c_module_source(module: str, kernels: Sequence[tuple[str, Params, str, Field
     their ``body_<name>`` functions), its module functions ``extra_methods`` ((name, C
     function, doc), METH_FASTCALL). Returns (source, {name: operations}).
     """
-    parts = [c_prelude(len(kernels))]
     counts: dict[str, int] = {}
+    sources = []
     for index, (name, params, _, fields) in enumerate(kernels):
         source, counts[name], _ = c_kernel_source(index, name, params, fields)
-        parts.append(source)
+        sources.append(source)
+    parts = [c_prelude(len(kernels))]
+    parts += [text for function, text in C_FUNCTIONS.items()
+              if any(f'{function}(' in source for source in sources)]
+    parts += sources
     if extra:
         parts.append(extra)
     methods = [f'    {{"{name}{many}", (PyCFunction)(void (*)(void))kernel_{name}{many}, '

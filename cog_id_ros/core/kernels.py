@@ -15,6 +15,12 @@ calls them and makes every decision (continuation, Newton's iteration, checks):
                                          accelerations the efforts tau produce
                                          (forward_dynamics.py) in place of the torques
 
+and a mechanism that is another's solver form (chains of three revolutes solved as
+spherical joints, spherical_chains.py) has a fifth, traced and compiled with the first three:
+
+    readout(q, qdot)                  -> joint_readout.ReadoutRecord: the chains' joint
+                                         angles and rates as written (Mechanism.joints_at)
+
 Backends (``InverseDynamics(mechanism, backend=...)``):
 
 * ``'reference'``: the lane code itself on Python floats (spatial.ScalarOps), nothing
@@ -37,13 +43,14 @@ import weakref
 
 import numpy as np
 
-from . import closure, native, native_simulation
+from . import closure, joint_readout, native, native_simulation
 from . import spatial as sp
 from .continuation import prediction
 from .emitter import c_module_source, python_function
 from .errors import MechanismConfigError
 from .forward_dynamics import forward_dynamics
 from .joint_motion import projection_increment, velocity_basis
+from .joint_readout import ReadoutPlan, ReadoutRecord, readout_record
 from .lanes import columns, flat
 from .pipeline import inverse_dynamics
 from .straight_line import Graph, SymOps
@@ -239,6 +246,9 @@ class ReferenceKernels:
                 tau: Sequence[float]) -> ForwardRecord:
         return forward_record(self.mechanism, q, target, qd, tau, sp.ScalarOps)
 
+    def readout(self, q: Sequence[float], qdot: Sequence[float]) -> ReadoutRecord:
+        return readout_record(ReadoutPlan(self.mechanism), q, qdot, sp.ScalarOps)
+
     def closure_many(self, q: FloatArray) -> FloatArray:
         return flat(closure_record(self.mechanism, columns(q), sp.ArrayOps)[1], len(q))
 
@@ -258,6 +268,12 @@ class ReferenceKernels:
 #: trace or compile them)
 TORQUE_KERNELS = ('prediction', 'closure', 'dynamics')
 FORWARD_KERNELS = ('prediction', 'closure', 'forward')
+
+
+def first_kernels(mechanism: 'Mechanism') -> tuple[str, ...]:
+    """The kernels of a mechanism's first library: the torque kernels, and the read-out
+    of the joints as written where it is another's solver form (joint_readout.py)."""
+    return TORQUE_KERNELS + (('readout',) if mechanism.stands_for else ())
 
 
 def trace(mechanism: 'Mechanism', kinds: Sequence[str] = TORQUE_KERNELS) -> list[Traced]:
@@ -284,6 +300,11 @@ def trace(mechanism: 'Mechanism', kinds: Sequence[str] = TORQUE_KERNELS) -> list
             out.append(('dynamics', [('q', q), ('target', target), ('qd', qd), ('qdd', qdd)],
                         PoseRecord, list(zip(PoseRecord._fields,
                                              pose_record(m, q, target, qd, qdd, SymOps)))))
+        elif kind == 'readout':         # last: the others' operations keep their numbers
+            qdot = graph.inputs('qdot', m.n_coordinates)
+            out.append(('readout', [('q', q), ('qdot', qdot)], ReadoutRecord,
+                        list(zip(ReadoutRecord._fields,
+                                 readout_record(ReadoutPlan(m), q, qdot, SymOps)))))
         else:
             out.append(('forward', [('q', q), ('target', target), ('qd', qd), ('tau', qdd)],
                         ForwardRecord, list(zip(ForwardRecord._fields,
@@ -302,7 +323,9 @@ class PythonKernels(ReferenceKernels):
         super().__init__(mechanism)
         self.source: dict[str, str] = {}
         self.operations: dict[str, int] = {}
-        self._add(trace(mechanism) if traced is None else traced)
+        self._add(trace(mechanism, first_kernels(mechanism)) if traced is None else traced)
+        if 'readout' in self.source:
+            joint_readout.offer(mechanism, self.name, self.readout)
 
     def _add(self, traced: Sequence[Traced]) -> None:
         for name, params, record, fields in traced:
@@ -327,10 +350,13 @@ class NativeKernels(ReferenceKernels):
     def __init__(self, mechanism: 'Mechanism') -> None:
         super().__init__(mechanism)
         module, self.operations = native.load_module(kernel_key(mechanism), self._source)
-        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord)
+        module.set_record_types(PredictionRecord, ClosureRecord, PoseRecord, ReadoutRecord)
         # the compiled functions stand in for the lane code's methods
         self.prediction = module.prediction                                 # type: ignore[method-assign]
         self.closure, self.dynamics = module.closure, module.dynamics     # type: ignore[method-assign]
+        if hasattr(module, 'readout'):
+            self.readout = module.readout                                   # type: ignore[method-assign]
+            joint_readout.offer(mechanism, self.name, module.readout)
         self.module = module
         self.modules: dict[str, Any] = dict.fromkeys(TORQUE_KERNELS, module)
         self.widths = {name: width(layout) for name, layout in self.layouts.items()}
@@ -381,7 +407,7 @@ class NativeKernels(ReferenceKernels):
         library must be built, and not kept (a large mechanism's trace is tens of MB)."""
         return c_module_source(module, [(name, params, record.__name__, fields)
                                         for name, params, record, fields in
-                                        trace(self.mechanism)])
+                                        trace(self.mechanism, first_kernels(self.mechanism))])
 
     def _forward_source(self, module: str) -> tuple[str, dict[str, int]]:
         """The same for the second library: the forward kernel, the two it is closed with,
@@ -398,11 +424,13 @@ class NativeKernels(ReferenceKernels):
 def kernel_key(mechanism: 'Mechanism') -> str:
     """Everything a mechanism's kernels are made of, as text: the model as read (joints,
     inertias, gravity, actuators, weights; the same whatever types the parameters came in,
-    e.g. rclpy's arrays, and whatever the initial positions) and the core's source."""
+    e.g. rclpy's arrays, and whatever the initial positions), the chains of a solver form
+    (their axes, frames and assembled angles: the read-out's) and the core's source."""
     m = mechanism
+    chains = repr(m.stands_for) if m.stands_for else ''
     return repr((m.joint_specs, m.closure_specs, m.link_mass, m.link_com, m.link_inertia,
                  m.gravity, m.active_index, m.primary, m.free_joints, m.dof,
-                 m.torque_weights)) + core_version()
+                 m.torque_weights)) + chains + core_version()
 
 
 @functools.cache

@@ -23,10 +23,10 @@ unit axes e1, e2, e3 (e1 . e2 = e2 . e3 = 0)::
 
     T = Rot(e1, q1) Rot(e2, q2) Rot(e3, q3)
 
-so (:func:`chain_angles`) e1 . T e3 = cos(q2) e1 . e3 + sin(q2) e1 . (e2 x e3) gives q2 (the
-root nearest the assembled angle), then q1 and q3 each turn one known vector onto another.
-The angles' rates follow from the relative angular velocity, w = W qdot with W = [e1,
-Rot(e1, q1) e2, Rot(e1, q1) Rot(e2, q2) e3] (:func:`chain_rates`).
+so (:func:`chain_angles`, joint_readout.py) e1 . T e3 = cos(q2) e1 . e3 + sin(q2) e1 . (e2
+x e3) gives q2 (the root nearest the assembled angle), then q1 and q3 each turn one known
+vector onto another. The angles' rates follow from the relative angular velocity, w = W qdot
+with W = [e1, Rot(e1, q1) e2, Rot(e1, q1) Rot(e2, q2) e3] (:func:`chain_rates`).
 
 W is singular where the first and last axes are parallel (the chain's gimbal lock, where
 three revolutes as written have no unique angles). The spherical joint has no such pose, so
@@ -36,6 +36,8 @@ half a turn away, the same rotation), and their rates at the lock itself are hug
 finite (``last_pose`` then raises ``out_of_range``, and the node publishes positions alone).
 The angles are read back within pi of their assembled values: where a chain winds on with
 the motion (a ball joint on a turning crank), as written they would count the turns.
+``Mechanism.joints_at`` reads them back (joint_readout.JointReadout): from the links the
+chains need alone, by the compiled or traced read-out kernel where a solver has made one.
 """
 from dataclasses import dataclass
 import math
@@ -45,10 +47,15 @@ import numpy as np
 
 from . import kinematics as kin
 from . import spatial as sp
+from .joint_readout import JointReadout, chain_angles, chain_rates, chain_turn
 from .joints import Revolute, Spherical
 from .parameters import split_owner
 from .pipeline import massless
-from .value_types import FloatArray, Lane, MechanismLike, Ops, Rotation, Vec3
+from .value_types import FloatArray, MechanismLike, Rotation, Vec3
+
+#: (with the read-out of the joints as written, joint_readout.py, used from here)
+__all__ = ['JointReadout', 'SphericalChain', 'chain_angles', 'chain_rates', 'chain_turn',
+           'chains_of', 'find_chains', 'solver_parameters', 'with_chain_starts']
 
 #: cosine below which two axes count as perpendicular, and the distance (times the
 #: mechanism's largest joint offset, at least 1 m) within which axes count as meeting
@@ -257,119 +264,3 @@ def _rotation(e1: Vec3, e2: Vec3, e3: Vec3, angles: Iterable[float]) -> Rotation
     for axis, angle in zip((e1, e2, e3), angles):
         rot = sp.mat_mat(rot, sp.rotation_about(axis, angle))
     return rot
-
-
-# --- reading the angles back (on lanes: floats for one sample, (N,) arrays for N) -------
-
-def chain_turn(chain: SphericalChain, rot_p: Rotation | None, rot_c: Rotation | None) -> Rotation:
-    """T = frame_p^T R_P^T R_C frame_c from the link rotations of P and C (9-tuples of
-    lanes, base frame; None for the base link)."""
-    if rot_p is None:
-        relative = sp.IDENTITY if rot_c is None else rot_c
-    elif rot_c is None:                    # C is the base link
-        relative = sp.transpose(rot_p)
-    else:
-        relative = sp.mat_mat(sp.transpose(rot_p), rot_c)
-    return sp.mat_mat(sp.mat_mat(sp.transpose(chain.frame_p), relative), chain.frame_c)
-
-
-def chain_angles(chain: SphericalChain, turn: Rotation, ops: Ops) -> tuple[Lane, ...]:
-    """The three joint coordinates (lanes) of T (a 9-tuple of lanes): the middle one on the
-    root nearest its assembled value, each within pi of its assembled value."""
-    e1, e2, e3 = chain.axes
-    ref = chain.reference
-    te3 = sp.mat_vec(turn, e3)
-    phi = math.atan2(sp.dot(e1, sp.cross(e2, e3)), sp.dot(e1, e3))
-    spread = ops.acos(sp.dot(e1, te3))
-    up, down = phi + spread, phi - spread
-    q2 = ops.select(abs(_wrap(up - ref[1])) <= abs(_wrap(down - ref[1])), up, down)
-    q1 = _turn_angle(e1, _rotate(e2, q2, e3, ops), te3, ops)
-    q3 = -_turn_angle(e3, _rotate(e2, -q2, e1, ops), sp.mat_t_vec(turn, e1), ops)
-    return tuple(r + _wrap(q - r) for q, r in zip((q1, q2, q3), ref))
-
-
-def chain_rates(chain: SphericalChain, angles: Sequence[Lane], omega: Vec3,
-                ops: Ops) -> tuple[Lane, Lane, Lane]:
-    """The three joint rates (lanes) from the angles (chain_angles) and the angular
-    velocity of C relative to P in frame_p (3 lanes), by Cramer's rule: at the lock (det 0)
-    they are not finite, never an exception."""
-    e1, e2, e3 = chain.axes
-    w2 = _rotate(e1, angles[0], e2, ops)
-    w3 = _rotate(e1, angles[0], _rotate(e2, angles[1], e3, ops), ops)
-    cross23 = sp.cross(w2, w3)
-    scale = ops.recip(sp.dot(e1, cross23))
-    return (sp.dot(omega, cross23) * scale, sp.dot(e1, sp.cross(omega, w3)) * scale,
-            sp.dot(e1, sp.cross(w2, omega)) * scale)
-
-
-def _rotate(axis: Vec3, angle: Lane, v: Vec3, ops: Ops) -> Vec3:
-    """Rot(axis, angle) v (Rodrigues) for a constant unit axis and lanes."""
-    c, s = ops.cos(angle), ops.sin(angle)
-    along = sp.dot(axis, v) * (1.0 - c)
-    return tuple(x * c + k * s + a * along for x, k, a in zip(v, sp.cross(axis, v), axis))
-
-
-def _turn_angle(axis: Vec3, v: Vec3, w: Vec3, ops: Ops) -> Lane:
-    """The angle of the rotation about ``axis`` that takes v onto w (at the same angle to
-    the axis)."""
-    return ops.atan2(sp.dot(sp.cross(v, w), axis),
-                     sp.dot(v, w) - sp.dot(v, axis) * sp.dot(w, axis))
-
-
-def _wrap(x: Lane) -> Lane:
-    return (x + math.pi) % (2.0 * math.pi) - math.pi
-
-
-# --- the joints as written, from the solver's coordinates --------------------------------
-
-class JointReadout:
-    """Positions and rates of ``mechanism.joints`` from the coordinates of its solver form
-    (``mechanism.solver_mechanism``): the joints it kept are copied, the chains' angles read
-    back from the link rotations (one sample on floats, N on (N,) lanes)."""
-
-    def __init__(self, mechanism: MechanismLike, solver: MechanismLike) -> None:
-        kept = [(k, solver.joint_index[name]) for k, name in enumerate(mechanism.joints)
-                if name in solver.joint_index]
-        self.kept_joints = [k for k, _ in kept]
-        self.kept_coordinates = [c for _, c in kept]
-        link = {solver.base_link: kin.BASE, **solver.link_index}
-        self.chains = [(chain, [mechanism.joint_index[j] for j in chain.joints],
-                        link[chain.parent], link[chain.child])
-                       for chain in mechanism.spherical_chains]
-        self.n_joints = len(mechanism.joints)
-        self.model = solver.model
-
-    def __call__(self, coordinates: Any,
-                 rates: Any = None) -> tuple[FloatArray, FloatArray | None]:
-        """(positions, rates or None): (n_joints,) for coordinates (n,), (N, n_joints) for
-        (N, n); ``rates`` the coordinates' rates, the same shape."""
-        q = np.asarray(coordinates, dtype=float)
-        single = q.ndim == 1
-        q = np.atleast_2d(q)
-        qdot: Any = None if rates is None else np.atleast_2d(np.asarray(rates, dtype=float))
-        ops = sp.ScalarOps if single else sp.ArrayOps
-        lanes = q[0].tolist() if single else list(q.T)
-        frames = kin.forward_kinematics(self.model, lanes, ops)
-        twists = None if qdot is None else kin.link_twists(
-            self.model, frames, qdot[0].tolist() if single else list(qdot.T))
-        positions = np.empty((len(q), self.n_joints))
-        positions[:, self.kept_joints] = q[:, self.kept_coordinates]
-        if twists is not None:
-            joint_rates = np.empty((len(q), self.n_joints))
-            joint_rates[:, self.kept_joints] = qdot[:, self.kept_coordinates]
-        for chain, columns, parent, child in self.chains:
-            rot_p = frames.rot[parent] if parent >= 0 else None
-            rot_c = frames.rot[child] if child >= 0 else None
-            angles = chain_angles(chain, chain_turn(chain, rot_p, rot_c), ops)
-            positions[:, columns] = np.array(angles, dtype=float).T
-            if twists is not None:
-                relative = sp.sub(kin.twist_of(twists, child)[0], kin.twist_of(twists, parent)[0])
-                if rot_p is not None:
-                    relative = sp.mat_t_vec(rot_p, relative)
-                omega = sp.mat_t_vec(chain.frame_p, relative)
-                joint_rates[:, columns] = np.array(chain_rates(chain, angles, omega, ops),
-                                                   dtype=float).T
-        out_rates = None if twists is None else joint_rates
-        if single:
-            return positions[0], None if out_rates is None else out_rates[0]
-        return positions, out_rates

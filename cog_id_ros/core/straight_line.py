@@ -13,7 +13,9 @@ and emitter.py writes what is left as one function of plain float statements. Th
 operations that remain are those the float path would do, in the same order, so the
 results agree with it to the last bit (up to the sign of a zero).
 
-Only branch-free lane code can be traced: a comparison of a ``Sym`` raises TypeError.
+Only branch-free lane code can be traced: a comparison of a ``Sym`` is a :class:`Condition`,
+which ``SymOps.select`` records as a choice and which raises TypeError where it would be
+taken as a truth value (an ``if``, ``and``, ``min``).
 """
 import math
 from typing import Any, Callable, NoReturn, Sequence
@@ -141,19 +143,64 @@ class Sym:
     def __rtruediv__(self, other: Lane) -> Lane:
         return _div(other, self)
 
+    def __mod__(self, other: Lane) -> Lane:
+        return _mod(self, other)
+
+    def __rmod__(self, other: Lane) -> Lane:
+        return _mod(other, self)
+
     def __neg__(self) -> Lane:
         return _neg(self)
 
     def __pos__(self) -> 'Sym':
         return self
 
+    def __abs__(self) -> Lane:
+        return _abs(self)
+
     def __bool__(self) -> NoReturn:
         raise TypeError('a symbolic lane has no truth value: only branch-free code can be traced')
 
-    def _compare(self, other: Lane) -> NoReturn:
-        self.__bool__()
+    def __lt__(self, other: Lane) -> 'Condition':
+        return Condition('lt', self, other)
 
-    __lt__ = __le__ = __gt__ = __ge__ = _compare
+    def __le__(self, other: Lane) -> 'Condition':
+        return Condition('le', self, other)
+
+    def __gt__(self, other: Lane) -> 'Condition':
+        return Condition('gt', self, other)
+
+    def __ge__(self, other: Lane) -> 'Condition':
+        return Condition('ge', self, other)
+
+
+class Condition:
+    """``a < b`` (``op`` 'lt'; 'le', 'gt', 'ge') of lanes, one a Sym: what SymOps.select
+    chooses by. It has no truth value (TypeError): only branch-free code can be traced."""
+    __slots__ = ('op', 'a', 'b')
+
+    def __init__(self, op: str, a: Lane, b: Lane) -> None:
+        self.op, self.a, self.b = op, a, b
+
+    def __bool__(self) -> NoReturn:
+        raise TypeError('a comparison of symbolic lanes has no truth value: only branch-free '
+                        'code can be traced (ops.select chooses by it)')
+
+    def select(self, x: Lane, y: Lane) -> Lane:
+        """x where the comparison holds, else y (NaN: y), as one operation."""
+        operands = (self.a, self.b, x, y)
+        graph = next(o for o in operands if isinstance(o, Sym)).graph
+        return graph.node(self.op + '_select', tuple(o if isinstance(o, Sym) else float(o)
+                                                     for o in operands))
+
+
+def _mod(a: Lane, b: Lane) -> Lane:
+    """Python's float a % b (the remainder with the sign of b)."""
+    if _is_const(a) and _is_const(b):
+        return a % b
+    graph = (a if isinstance(a, Sym) else b).graph
+    return graph.node('mod', (a if isinstance(a, Sym) else float(a),
+                              b if isinstance(b, Sym) else float(b)))
 
 
 def _unary(op: str, fold: Callable[[float], float]) -> Any:
@@ -163,7 +210,8 @@ def _unary(op: str, fold: Callable[[float], float]) -> Any:
 
 
 def _pick(op: str, fold: Callable[[Any, Any], Any]) -> Callable[[Lane, Lane], Lane]:
-    """A NaN-keeping max or min of two lanes (spatial.larger, spatial.smaller)."""
+    """A NaN-keeping max or min of two lanes (spatial.larger, spatial.smaller); also any
+    other function of two lanes (``op``, ``fold`` on constants)."""
     def apply(a: Lane, b: Lane) -> Lane:
         if _is_const(a) and _is_const(b):
             return fold(a, b)
@@ -184,6 +232,16 @@ class SymOps:
     cos = _unary('cos', math.cos)
     sqrt = _unary('sqrt', lambda x: math.sqrt(x) if x >= 0.0 else math.nan)
     recip = _unary('recip', lambda x: 1.0 / x if x != 0.0 else math.inf)
+    # arccos of x clipped to [-1, 1] (a NaN to -1), as spatial.ScalarOps.acos
+    acos = _unary('acos', lambda x: math.acos(min(1.0, max(-1.0, x))))
+    atan2 = staticmethod(_pick('atan2', math.atan2))
+
+    @staticmethod
+    def select(condition: Any, a: Lane, b: Lane) -> Lane:
+        """a where ``condition`` (a Condition, or a bool of constants) holds, else b."""
+        if isinstance(condition, Condition):
+            return condition.select(a, b)
+        return a if condition else b
 
     @staticmethod
     def maxabs(lanes: Sequence[Lane]) -> Lane:
