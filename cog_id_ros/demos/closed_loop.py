@@ -7,8 +7,9 @@ What it does: for each mode (``feedforward``, ``computed_torque`` with kp 400 an
 ``pd_feedforward`` with the same rates at the start pose, ``gravity_compensation``) it
 starts, in a namespace of its own, one ``cog_sim_node`` (the plant: the paper four-bar
 started 0.1 rad off the target, ``wait_for_effort:=true`` so it holds that pose until the
-first command, ``real_time_factor`` 0.2 so a loaded machine keeps up, ``joint_states``
-after every step) and one ``cog_id_node`` on config/paper_four_bar_a.yaml
+first command, ``lockstep:=true`` so it steps once per command, ``joint_states`` after
+every step, whatever the load of the machine) and one ``cog_id_node`` on
+config/paper_four_bar_a.yaml
 (``-r measured_joint_states:=joint_states``, ``joint_states_decimation:=0``; its
 ``effort_command`` is the simulator's input without a remap). The target is the paper's
 motion theta(t) = pi/2 + 0.5 sin(pi t), played on simulated time by a player in this
@@ -52,9 +53,11 @@ MODES = {
 }
 START_ERROR = 0.1     # rad
 H = 0.001             # s: the simulator's step
-#: simulated seconds per wall second: a step is 5 ms of wall time, in which the node
-#: answers the state before it even on a loaded 2-core machine (at 0.25 a run under a
-#: load average of 3 had commands late enough to leave 1.3e-3 rad)
+#: simulated seconds per wall second at most. The simulator in lockstep waits for each
+#: command, so a late command never acts a step late; the player (this process, Python)
+#: publishes the target on each simulated state, and at 1 kHz a loaded machine leaves it
+#: behind (a run at 1.0 drew PD plus feed-forward 0.3 rad off its target for half a
+#: second): at 0.2 a step is 5 ms of wall time, time enough for it too
 REAL_TIME_FACTOR = 0.2
 #: s of wall time the commands of the last states may take to arrive
 SETTLE = 5.0
@@ -71,8 +74,10 @@ def target(t: float) -> tuple[list[float], list[float]]:
 def plant_params(config: str, directory: str) -> str:
     """The parameter file with the parallelogram started START_ERROR off the target."""
     import yaml
+
+    from ..description import yaml_guard
     with open(config, encoding='utf-8') as stream:
-        doc = yaml.safe_load(stream)
+        doc = yaml_guard.load(stream.read(), yaml.SafeLoader, 'params_file', config)
     theta = target(0.0)[0][0] + START_ERROR
     doc['/**']['ros__parameters']['mechanism']['initial_positions'] = [
         theta, -theta, theta, theta]
@@ -91,7 +96,8 @@ def start_sim(plant: str, namespace: str) -> Any:
     """cog_sim_node, the plant, holding its start pose until the first command."""
     return launch(['cog_id_ros.ros.sim_main', '--ros-args', '--params-file', plant,
                   '-r', f'__ns:={namespace}', '-p', 'wait_for_effort:=true',
-                  '-p', f'real_time_factor:={REAL_TIME_FACTOR}', '-p', f'time_step:={H}',
+                  '-p', 'lockstep:=true', '-p', f'real_time_factor:={REAL_TIME_FACTOR}',
+                  '-p', f'time_step:={H}',
                   '-p', 'joint_states_period:=0.0', '-p', 'effort_timeout:=0.0'])
 
 

@@ -49,6 +49,15 @@ REASONS = {
 #: ``limit`` (a measured pose beyond a limit is commanded from)
 MEASUREMENT_REASONS = tuple(r for r in REASONS if r not in ('stamp', 'limit'))
 
+#: reasons only a measured state can be rejected for (feedback modes)
+MEASUREMENT_ONLY_REASONS = {
+    'publishers': 'more publishers feed measured_joint_states than max_measured_publishers '
+                  '(a second source must never take over the controller)',
+    'restart': 'the first measured state after measurement_timeout, not yet confirmed by a '
+               'next one within max_measurement_step (the new stream starts from the second)',
+}
+MEASUREMENT_REASONS += tuple(MEASUREMENT_ONLY_REASONS)
+
 #: reasons a whole trajectory can be refused for besides those of REASONS (its points)
 TRAJECTORY_REASONS = {
     'too_long': 'more points than max_trajectory_points',
@@ -67,7 +76,8 @@ class Rejected(ValueError):
     points: int
 
     def __init__(self, reason: str, message: str) -> None:
-        assert reason in REASONS or reason in TRAJECTORY_REASONS, reason
+        assert reason in REASONS or reason in TRAJECTORY_REASONS or \
+            reason in MEASUREMENT_ONLY_REASONS, reason
         self.reason = reason
         super().__init__(message)
 

@@ -46,6 +46,8 @@ DIAGNOSTIC_KEYS = {
     'trajectory_in_progress': 'true while a trajectory is being solved',
     'effort_clipped': 'setpoints, trajectories and hold commands that were clipped',
     'timeouts': 'times the stream stopped',
+    'setpoints_while_inactive': 'setpoints that arrived while the managed node was not '
+                                'active: taken, not served (nothing is published then)',
     'internal_errors': 'exceptions the node caught in its own callbacks (a bug: please report)',
     'nodes_with_this_name': "nodes in the ROS graph with this node's name and namespace "
                             '(more than 1: every setpoint gets several commands)',
@@ -70,7 +72,12 @@ FEEDBACK_DIAGNOSTIC_KEYS = {
     'measurements_rejected': 'measured states rejected since start, never commanded from '
                              '(sum of measurements_rejected.<kind>)',
     'measured_state_publishers': 'publishers of measured_joint_states matched to the '
-                                 "node's subscription, as the node sees them",
+                                 "node's subscription, as the node sees them (more than "
+                                 'max_measured_publishers: none is commanded from)',
+    'measurements_lost': 'measured states the single publisher sent that never reached the '
+                         'node (gaps in its sequence numbers: a full subscription queue)',
+    'measurements_while_inactive': 'measured states that arrived while the managed node was '
+                                   'not active: taken, not commanded from',
     'measurement_age': 's since the last accepted measured state was received',
     'tracking_error_max': 'largest |q_d - q_m| of any active joint over the last period, rad '
                           'or m',
@@ -334,6 +341,8 @@ class Report:
                 *((f'measurements_rejected.{reason}', count)
                   for reason, count in counts.measurement_rejected.items()),
                 ('measured_state_publishers', counts.matched['measured_joint_states']),
+                ('measurements_lost', node.measurements.lost.total),
+                ('measurements_while_inactive', counts.totals['measurements_while_inactive']),
                 ('measurement_age', '' if age is None else f'{age:.4f}'),
                 *((f'tracking_error.{joint}', f'{e:.6g}')
                   for joint, e in zip(node.config.active_joints, errors)),
@@ -394,6 +403,7 @@ class Report:
                 ('trajectory_in_progress', str(self.node.trajectory_worker.busy).lower()),
                 ('effort_clipped', c['effort_clipped']),
                 ('timeouts', c['timeouts']),
+                ('setpoints_while_inactive', c['setpoints_while_inactive']),
                 ('internal_errors', c['internal_errors'])]
 
     def _times(self) -> list[tuple[str, Any]]:

@@ -10,6 +10,7 @@ charge of SIGINT and SIGTERM first, then imports numpy, rclpy and the node (abou
 on a busy machine), so that a stop signal at any moment ends the process with exit status 0
 and no traceback.
 """
+import faulthandler
 import os
 import signal
 import sys
@@ -71,6 +72,9 @@ def console_main(body: Callable[[list[str] | None], int], args: list[str] | None
     """
     for signum in STOP_SIGNALS:     # first: Python is still to import numpy, rclpy, ...
         signal.signal(signum, _exit_at_once)
+    # SIGUSR1 prints every thread's Python stack to stderr (a node that seems stuck:
+    # `kill -USR1 <pid>`, docs/node.md); the process goes on
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         return body(args)
     finally:
@@ -92,7 +96,8 @@ def _exit_at_once(signum: int, frame: object) -> None:
 
 
 def _main(args: list[str] | None) -> int:
-    return node_main(args, PROGRAM, USAGE, lambda: _cog_id_node(args))
+    from .command_line import modes_help
+    return node_main(args, PROGRAM, USAGE + modes_help(), lambda: _cog_id_node(args))
 
 
 def _cog_id_node(args: list[str] | None) -> tuple[str, Callable[..., Any]]:

@@ -6,12 +6,18 @@ and its services (``~/change_state``, ``~/get_state``, ``~/get_available_states`
 nothing but those services. ``configure`` declares the parameters (the first time; they
 stay read-only), loads the mechanism and makes everything that serves (solvers with their
 kernels compiled, topics, the setpoint and measured state threads, the trajectory
-process, timers); ``activate`` opens the stream: until then nothing is published
-(setpoints and measured states that arrive are dropped, /diagnostics is silent);
-``deactivate`` publishes ``timeout_behavior``'s command once, at the last pose served (or
-measured), and then nothing; ``cleanup`` releases what configure made (threads, the
-trajectory process, topics, timers, solvers); ``shutdown`` does the same from any state
-(from active, after the command deactivate publishes). A transition that is not
+process, timers), again at every configure (a configure that failed, e.g. on a URDF not
+there yet, is logged and may be tried again); ``activate`` opens the stream: until then
+nothing is published (setpoints and measured states that arrive are counted, not served,
+/diagnostics is silent);
+``deactivate`` publishes ``timeout_behavior``'s command at the last pose served (or
+measured) and again every ``inactive_period`` while inactive: an inactive controller holds
+the mechanism as a drive's brakes would (a plant that zeroes efforts when commands stop
+would otherwise let it fall); setpoints and measured states that arrive meanwhile are
+counted (``*_while_inactive``), not served; ``cleanup`` releases what configure made
+(threads, the trajectory process, topics, timers, solvers); ``shutdown`` does the same from
+any state (from active, after the command deactivate publishes, once) and ends the
+process. A transition that is not
 available from the current state is answered ``success: false``.
 """
 import contextlib
@@ -32,7 +38,6 @@ class ManagedCogIdNode(LifecycleNodeMixin, CogIdNode):
                  **kwargs: Any) -> None:
         self.active = False
         self._made = False
-        self._overrides: dict[str, Any] | None = None     # given values, once declared
         self._command_line = command_line
         CogIdNode.__init__(self, command_line, interruptible, build=False, **kwargs)
         LifecycleNodeMixin.__init__(self)
@@ -80,22 +85,28 @@ class ManagedCogIdNode(LifecycleNodeMixin, CogIdNode):
     # --- transitions ------------------------------------------------------------------------
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Load the mechanism and make everything that serves. A failure (a URDF not there
+        yet, a gain out of range, anything else) is logged, what was made is released, and
+        the node stays unconfigured: configure may be tried again (it reads the parameters
+        as given again; those the failed attempt declared stay declared, read-only)."""
         try:
-            if self._overrides is None:
-                self._overrides = self._read_parameters(self._command_line,
-                                                        contextlib.nullcontext)
-            self._make(self._overrides, contextlib.nullcontext)
+            overrides = self._read_parameters(self._command_line, contextlib.nullcontext)
+            self._made = True          # (released below if what follows fails)
+            self._make(overrides, contextlib.nullcontext)
             if not self._refusing:
                 self.refuse_changes()
-            self._made = True
             CogIdNode.start(self)
-        except (MechanismConfigError, CogIdError) as exc:
-            self.get_logger().error(f'configure failed: {exc}')
+        except Exception as exc:   # noqa: BLE001 (every failure: logged, released, FAILURE)
+            what = str(exc) if isinstance(exc, (MechanismConfigError, CogIdError)) else \
+                f'{type(exc).__name__}: {exc}'
+            self.get_logger().error(f'configure failed: {what}; configure may be tried again')
+            self._release()
             return TransitionCallbackReturn.FAILURE
         self.get_logger().info('configured: activate to serve')
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_holding()
         with self.lock:
             # a new stream: no estimate, jump or unwrap across the inactive time
             self.setpoints.stopped = True
@@ -110,29 +121,59 @@ class ManagedCogIdNode(LifecycleNodeMixin, CogIdNode):
         self._leave_active('inactive')
         return TransitionCallbackReturn.SUCCESS
 
-    def _leave_active(self, now: str) -> None:
-        """Stop serving and publish timeout_behavior's command once (deactivate, or shutdown
-        from active: the motors are not left with the last command)."""
+    def _leave_active(self, now: str, hold: bool = True) -> None:
+        """Stop serving and publish timeout_behavior's command (deactivate, or shutdown
+        from active: the motors are not left with the last command); with ``hold`` and an
+        inactive_period, again every period while inactive (a drive's brakes)."""
         with self.lock:
             self.active = False
             stream = self.measurements if self.measurements is not None else self.setpoints
             what = self.apply_timeout_behavior(stream.last_pose)
-        self.get_logger().info(f'{now}: {what or "nothing published"}, then nothing')
+        period = self.config.inactive_period
+        if hold and period > 0.0 and self.timeout_command is not None:
+            self._holding = self.create_timer(period, self._hold_while_inactive)
+            then = f'again every {period:g} s until activate, cleanup or shutdown'
+        else:
+            then = 'then nothing'
+        log = self.get_logger().warning if self.config.timeout_behavior == 'zero' and hold \
+            else self.get_logger().info
+        log(f'{now}: {what or "nothing published"}, {then}'
+            + ('; zero efforts: the mechanism is not held (it may fall)'
+               if self.config.timeout_behavior == 'zero' else ''))
+
+    def _hold_while_inactive(self) -> None:
+        """Inactive: timeout_behavior's command again (the one deactivate published)."""
+        command = getattr(self, 'timeout_command', None)
+        if command is not None and not self.active and self._made:
+            self.command_pub.publish(command)
+
+    def _stop_holding(self) -> None:
+        timer = self.__dict__.pop('_holding', None)
+        if timer is not None:
+            self.destroy_timer(timer)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_holding()
         self._release()
         self.get_logger().info('cleaned up: configure to load again')
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """From any state: from active the command of timeout_behavior once; then what
+        configure made is released, and the process ends (main() spins until
+        ``finished``)."""
+        self._stop_holding()
         if self.active:
-            self._leave_active('shutting down')
+            self._leave_active('shutting down', hold=False)
         self.active = False
         if self._made:
             self._release()
+        self.finished = True
+        self.get_logger().info('finalized: the process ends')
         return TransitionCallbackReturn.SUCCESS
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_holding()
         self.active = False
         if self._made:
             self._release()
@@ -140,20 +181,31 @@ class ManagedCogIdNode(LifecycleNodeMixin, CogIdNode):
 
     def _release(self) -> None:
         """Stop the threads and the trajectory process, destroy the topics and timers, drop
-        the solvers: what configure made."""
+        the solvers: what configure made, as far as it got (a configure that failed half
+        way is released too)."""
         self.active = False
         self._made = False
-        CogIdNode.stop(self)
-        for timer in self.timers_made:
+        made = self.__dict__
+        if 'trajectory_worker' in made:
+            CogIdNode.stop(self)
+        else:
+            for loop in (made.get('setpoint_loop'), made.get('measurement_loop')):
+                if loop is not None:
+                    loop.stop()
+        for timer in made.get('timers_made', []):
             self.destroy_timer(timer)
-        for publisher in (self.command_pub, self.effort_pub, self.joint_states_pub,
-                          self.trajectory_pub, self.diagnostics.publisher):
+        diagnostics = made.get('diagnostics')
+        for publisher in (made.get('command_pub'), made.get('effort_pub'),
+                          made.get('joint_states_pub'), made.get('trajectory_pub'),
+                          None if diagnostics is None else diagnostics.publisher):
             if publisher is not None:
                 self.destroy_publisher(publisher)
-        for loop in (self.setpoint_loop, self.measurement_loop):
+        for loop in (made.get('setpoint_loop'), made.get('measurement_loop')):
             if loop is not None:
                 self.destroy_subscription(loop.subscription)
-        self.destroy_subscription(self.trajectory_sub)
-        self.timers_made = []
-        for made in ('solver', 'report', 'mode'):     # the kernels go with them
-            self.__dict__.pop(made, None)
+        if made.get('trajectory_sub') is not None:
+            self.destroy_subscription(made['trajectory_sub'])
+        for name in ('solver', 'report', 'mode', 'timers_made', 'command_pub', 'effort_pub',
+                     'joint_states_pub', 'trajectory_pub', 'diagnostics', 'setpoint_loop',
+                     'measurement_loop', 'trajectory_sub', 'trajectory_worker'):
+            made.pop(name, None)        # (the kernels go with the solvers)

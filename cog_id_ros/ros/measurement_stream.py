@@ -7,17 +7,22 @@ than ``measurement_timeout`` ago: ``stale``), the active joints' positions and v
 (:func:`.conversions.setpoint_arrays`: names, lengths, ``non_finite``; velocities required
 where the mode needs them, none faster than ``max_measured_velocity``: ``velocity``),
 and, within a stream, unwrapping and the step since the last accepted measurement
-(``jump``). Whether the loops close at the measured pose is the
-mode's solve (:mod:`.feedback`). The node calls :meth:`MeasurementStream.accept` once the
+(``jump``). A topic fed by more publishers than ``max_measured_publishers`` is not
+commanded from at all (``publishers``: a stale recording or a second simulator never takes
+over the controller), and after a timeout the new stream starts only once two measured
+states in a row agree within ``max_measurement_step`` (``restart``: the first message after
+a gap is not trusted as the reference alone). Whether the loops close at the measured pose
+is the mode's solve (:mod:`.feedback`). The node calls :meth:`MeasurementStream.accept` once the
 command is published; :meth:`MeasurementStream.stopped_for` says when no measurement was
 accepted for the timeout (``timeout_behavior`` then applies, once, and the next
 measurement starts a new stream).
 """
 import time
-from typing import Any
+from typing import Any, Callable
 
 from .config import NodeConfig
 from .conversions import JointSelector, Rejected, nearest_turn, setpoint_arrays
+from .lost_messages import LostMessages
 from .setpoint_filter import NANOSECONDS
 
 
@@ -25,10 +30,12 @@ class MeasurementStream:
     """Checks the measured states of one stream by the node's parameters.
 
     ``needs_velocities``: the mode's law uses the measured velocities (a measurement
-    without them is rejected, ``malformed``); else they are taken as zero.
+    without them is rejected, ``malformed``); else they are taken as zero. ``publishers``:
+    the publishers of the topic now, as the node sees them.
     """
 
-    def __init__(self, config: NodeConfig, needs_velocities: bool) -> None:
+    def __init__(self, config: NodeConfig, needs_velocities: bool,
+                 publishers: Callable[[], int] = lambda: 1) -> None:
         self.active_joints = list(config.active_joints)
         self.selector = JointSelector(self.active_joints)
         self.unwrap = config.unwrap
@@ -37,6 +44,10 @@ class MeasurementStream:
         self.timeout = config.measurement_timeout
         self.max_age_ns = int(config.measurement_timeout * NANOSECONDS)
         self.needs_velocities = needs_velocities
+        self.publishers = publishers
+        self.max_publishers = config.max_measured_publishers
+        self.lost = LostMessages(publishers)   # gaps in the single publisher's numbers
+        self.candidate: list[float] | None = None   # a restart's first measured state
         self.last_pose: list[float] | None = None   # positions of the last accepted one
         self.last_time: float | None = None   # monotonic receipt time of the last accepted one
         self.stopped = True                   # no measurement yet, or none for the timeout
@@ -49,7 +60,14 @@ class MeasurementStream:
         source and reception timestamps: a measurement published or received longer than
         measurement_timeout ago is stale)."""
         if info is not None:
+            self.lost.count(info)
             self._check_age(info)
+        count = self.publishers()
+        if self.max_publishers and count > self.max_publishers:
+            raise Rejected('publishers', f'{count} publishers feed measured_joint_states, more '
+                                         f'than max_measured_publishers '
+                                         f'({self.max_publishers}): not commanded from; stop '
+                                         f'the others (a recording, a second plant)')
         q, v = setpoint_arrays(msg, self.selector, 'measured state')
         if v is None:
             if self.needs_velocities:
@@ -60,7 +78,9 @@ class MeasurementStream:
             if abs(rate) > limit:
                 raise Rejected('velocity', f'measured velocity of {joint} is {rate:.6g}, beyond '
                                f'max_measured_velocity ({limit:g}): not commanded from')
-        previous = None if self.stopped else self.last_pose
+        if self.stopped and self.last_pose is not None:
+            self._confirm_restart(q)
+        previous = self.candidate if self.stopped else self.last_pose
         if previous is not None:
             q = [nearest_turn(x, ref) if wrap else x
                  for x, ref, wrap in zip(q, previous, self.unwrap)]
@@ -72,8 +92,23 @@ class MeasurementStream:
         self._taken = q
         return q, v
 
+    def _confirm_restart(self, q: list[float]) -> None:
+        """After a timeout: the first measured state is held as a candidate, not commanded
+        from (Rejected 'restart'); the stream starts again with the next one that agrees
+        with the candidate within max_measurement_step (else that one is the candidate)."""
+        candidate = self.candidate
+        if candidate is not None and all(
+                abs((nearest_turn(x, ref) if wrap else x) - ref) <= limit
+                for x, ref, wrap, limit in zip(q, candidate, self.unwrap, self.max_step)):
+            return
+        self.candidate = list(q)
+        raise Rejected('restart', 'the first measured state after measurement_timeout: the '
+                                  'stream starts again when the next one agrees with it '
+                                  '(within max_measurement_step)')
+
     def accept(self) -> None:
         """The measurement taken last was commanded from: it is the stream's last pose."""
+        self.candidate = None
         self.last_pose = self._taken
         self.last_time = time.monotonic()
         self.stopped = False

@@ -53,13 +53,16 @@ from .feedback import FeedbackMode
 from .measurement_stream import MeasurementStream
 from .modes import Mode, make_mode
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
-from .read_only_node import ReadOnlyNode
+from .read_only_node import ReadOnlyNode, assembly_warnings_logged
 from .setpoint_loop import SetpointLoop
 from .setpoint_stream import SetpointStream
-from .topics import FEEDBACK_TOPICS, TOPICS, control_qos
+from .topics import FEEDBACK_TOPICS, TOPICS, control_qos, stream_qos
 from .trajectory_worker import TrajectoryWorker
 
 NODE_NAME = 'cog_id_node'
+#: s a feedback mode waits for its first measured state before it says so (and between
+#: two reminders)
+NO_STATE_PERIOD = 5.0
 
 
 class CogIdNode(ReadOnlyNode):
@@ -95,7 +98,7 @@ class CogIdNode(ReadOnlyNode):
         base_dir = {name: urdf_base_dir(command_line, self.get_name(), name)
                     for name in ('mechanism.urdf_file', 'mechanism.loop_closure_file')
                     if name in overrides}
-        with interruptible():
+        with interruptible(), assembly_warnings_logged():
             self.mechanism = Mechanism.from_parameters(self.declare_given(
                 overrides, is_mechanism_parameter, 'mechanism (read at start-up)'),
                 base_dir=base_dir)
@@ -129,8 +132,9 @@ class CogIdNode(ReadOnlyNode):
         self.setpoints = SetpointStream(
             config, self.counts, self.get_logger(), self._now_ns,
             lambda: self.setpoint_loop.subscription.get_publisher_count())
-        self.measurements = MeasurementStream(config, self.mode.needs_velocities) \
-            if self.mode.measured else None
+        self.measurements = MeasurementStream(
+            config, self.mode.needs_velocities,
+            lambda: self.counts.matched['measured_joint_states']) if self.mode.measured else None
         self.effort_limits = config.effort_limits if config.limited else None  # None: no clip
         self.outputs = EffortMessages(config.active_joints, self.mechanism.joints)
         self._joint_states_countdown = 1      # served setpoints until the next joint_states
@@ -143,12 +147,15 @@ class CogIdNode(ReadOnlyNode):
             logger_name=self.get_logger().get_child('trajectories').name)
         self.timers_made = [self.create_timer(config.diagnostics_period,
                                               self.publish_diagnostics)]
+        self._timer_runs: dict[str, tuple[float | None, float]] = {}
+        self._timer_periods = {'setpoints': min(config.setpoint_timeout / 4.0, 0.25),
+                               'measured': min(config.measurement_timeout / 4.0, 0.25)}
         if config.setpoint_timeout > 0.0:
-            self.timers_made.append(self.create_timer(
-                min(config.setpoint_timeout / 4.0, 0.25), self.check_timeout))
+            self.timers_made.append(self.create_timer(self._timer_periods['setpoints'],
+                                                      self.check_timeout))
         if self.measurements is not None:
-            self.timers_made.append(self.create_timer(
-                min(config.measurement_timeout / 4.0, 0.25), self.check_measurement_timeout))
+            self.timers_made.append(self.create_timer(self._timer_periods['measured'],
+                                                      self.check_measurement_timeout))
         self.get_logger().info(start_up_summary(self.mechanism, config))
         for warning in getattr(self.mechanism, 'assembly_warnings', None) or ():
             self.get_logger().warning(f'mechanism: {warning}')
@@ -177,12 +184,12 @@ class CogIdNode(ReadOnlyNode):
         # setpoint_loop.py). start() once the node is built; stop() before destroying it.
         self.setpoint_loop = SetpointLoop(
             self, JointState, TOPICS['joint_setpoint'].name, self.serve_setpoint,
-            control_qos(), lock=self.lock, on_error=self._serve_failed, with_info=True,
+            stream_qos(), lock=self.lock, on_error=self._serve_failed, with_info=True,
             qos_overriding_options=qos_options(), event_callbacks=self._matched('joint_setpoint'))
         # feedback modes: the measured states, served like setpoints by a thread of their own
         self.measurement_loop = SetpointLoop(
             self, JointState, FEEDBACK_TOPICS['measured_joint_states'].name,
-            self.serve_measurement, control_qos(), lock=self.lock,
+            self.serve_measurement, stream_qos(), lock=self.lock,
             on_error=self._measurement_failed, with_info=True,
             qos_overriding_options=qos_options(),
             event_callbacks=self._matched('measured_joint_states')) \
@@ -267,6 +274,7 @@ class CogIdNode(ReadOnlyNode):
         ``info``: rclpy's message info (lost and stale setpoints, :class:`.SetpointStream`).
         """
         if not self.active:         # a managed node before activate: nothing is published
+            self._while_inactive('setpoints_while_inactive', self.setpoints.lost, info)
             return
         start = time.perf_counter()
         stream, counts = self.setpoints, self.counts
@@ -327,6 +335,8 @@ class CogIdNode(ReadOnlyNode):
         a stale, jumping, non-finite or unclosable measurement). Called by the measured
         state thread with ``self.lock`` held, once per message, in the order received."""
         if not self.active:
+            self._while_inactive('measurements_while_inactive',
+                                 cast(MeasurementStream, self.measurements).lost, info)
             return
         start = time.perf_counter()
         # the setpoints that arrived before this measured state are in force before it is
@@ -354,6 +364,12 @@ class CogIdNode(ReadOnlyNode):
         if self.joint_states_pub is not None:       # when given: the measured pose, closed
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
             self._joint_states_due(msg.header.frame_id, stamp, v, mode.measured_solver)
+
+    def _while_inactive(self, key: str, lost: Any, info: dict | None) -> None:
+        """A message taken while a managed node is not active: counted as such (``key``),
+        not served; its sequence number kept, so that it is not counted lost later."""
+        self.counts.totals[key] += 1
+        lost.count(info)
 
     def _measurement_failed(self, exc: Exception) -> None:
         """A measured state that failed in a way serve_measurement does not expect (a
@@ -394,10 +410,13 @@ class CogIdNode(ReadOnlyNode):
     @guarded
     def check_timeout(self) -> None:
         """When setpoints stop: restart the estimator and apply timeout_behavior, once (a
-        feedback mode: the last setpoint stays in force, at rest)."""
+        feedback mode: the last setpoint stays in force, at rest). Judged on what has
+        arrived: setpoints queued for the setpoint thread are served first (after a stall of
+        the node the timer may wake before that thread does)."""
         with self.lock:
-            if not self.active:
+            if not self.active or self._woke_late('setpoints'):
                 return
+            self.setpoint_loop.serve_queued()
             self._check_timeout()
 
     def _check_timeout(self) -> None:
@@ -419,10 +438,18 @@ class CogIdNode(ReadOnlyNode):
     @guarded
     def check_measurement_timeout(self) -> None:
         """Feedback modes: no measured state accepted for measurement_timeout (none came,
-        or each was rejected): timeout_behavior at the last measured pose, once."""
+        or each was rejected): timeout_behavior at the last measured pose, once. The
+        measured states (and setpoints) queued are served first."""
         stream = cast(MeasurementStream, self.measurements)
         with self.lock:
-            if not self.active or not stream.stopped_for(self.config.measurement_timeout):
+            if not self.active or self._woke_late('measured'):
+                return
+            # judged on what has arrived, not on when this process last ran: after a stall
+            # the timer may wake before the measured state thread, with fresh states queued
+            self.setpoint_loop.serve_queued()
+            cast(Any, self.measurement_loop).serve_queued()
+            self._no_measured_state(stream.last_time)
+            if not stream.stopped_for(self.config.measurement_timeout):
                 return
             self.counts.totals['timeouts'] += 1
             what = self.apply_timeout_behavior(stream.last_pose)
@@ -431,14 +458,51 @@ class CogIdNode(ReadOnlyNode):
                     f'no measured state accepted for {self.config.measurement_timeout:g} s: '
                     f'{what}')
 
+    def _no_measured_state(self, last: float | None) -> None:
+        """A feedback mode with no measured state accepted since it started serving, or
+        since ``last`` (monotonic): said every NO_STATE_PERIOD s. A plant that stopped (a
+        simulator at a singular pose), or stopped before the controller connected, or
+        publishes elsewhere, leaves a controller that commands nothing: it says why."""
+        now = time.monotonic()
+        since = self.__dict__.setdefault('_serving_since', now) if last is None else last
+        told = max(self.__dict__.get('_told_no_state', since), since)
+        if now - told < NO_STATE_PERIOD:
+            return
+        self._told_no_state = now
+        publishers = self.counts.matched['measured_joint_states']
+        self.get_logger().warning(
+            f"no measured state accepted {'in' if last is None else 'since the last one,'} "
+            f'{now - since:.0f} s, on '
+            f'{cast(Any, self.measurement_loop).subscription.topic_name} ({publishers} '
+            f'publisher(s)): '
+            'nothing is commanded until one comes; is the plant running (a simulator whose '
+            'integration stopped publishes no more states: its log and /diagnostics say why), '
+            'and does it publish on this topic (remap it with -r measured_joint_states:=...)? '
+            'Those that came and were rejected are counted in /diagnostics '
+            '(measurements_rejected.<reason>)')
+
+    def _woke_late(self, timer: str) -> bool:
+        """Whether the timeout timer ``timer`` is to wait: it ran more than two of its
+        periods after its run before, less than a period ago. This process was stopped or
+        starved meanwhile, and what was sent to it then (fresh setpoints or measured states)
+        may still be on its way into the subscription: the timeout is judged a period after
+        the process runs again, on what arrived by then."""
+        now, period = time.monotonic(), self._timer_periods[timer]
+        last, resumed = self._timer_runs.get(timer, (None, -math.inf))
+        if last is not None and now - last > 2.0 * period:
+            resumed = now               # it was stopped: wait a period for the inputs
+        self._timer_runs[timer] = (now, resumed)
+        return now - resumed < period
+
     def apply_timeout_behavior(self, pose: Sequence[float] | None) -> str | None:
         """Publish timeout_behavior's command once (hold: the gravity-holding efforts of
         ``pose``, or of initial_positions without one); what was done, None if it failed."""
         config = self.config
+        self.timeout_command = None
         if config.timeout_behavior == 'none':
-            what = 'nothing published'
-        elif config.timeout_behavior == 'zero':
-            self.command_pub.publish(self.outputs.command_for([0.0] * len(config.active_joints)))
+            return 'nothing published'
+        if config.timeout_behavior == 'zero':
+            efforts = [0.0] * len(config.active_joints)
             what = 'zero efforts published'
         else:
             if pose is None:
@@ -449,8 +513,11 @@ class CogIdNode(ReadOnlyNode):
                 self.get_logger().error(f'cannot compute holding efforts: {exc}')
                 return None
             self.clip(tau)
-            self.command_pub.publish(self.outputs.command_for(tau.tolist()))
+            efforts = tau.tolist()
             what = 'gravity-holding efforts of the last pose published'
+        #: the command published last by a timeout (a managed node repeats it while inactive)
+        self.timeout_command = self.outputs.command_for(efforts)
+        self.command_pub.publish(self.timeout_command)
         return what
 
     def _initial_active_positions(self) -> list[float]:

@@ -385,12 +385,29 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     'never commanded from: a corrupt velocity would reach the motors through '
                     'kd and the velocity terms (`.inf`: no check)'),
     NodeParameter(
+        'max_measured_publishers', 'int', 1, 'integer', low=0, high=1_000_000,
+        description='feedback modes: measured states are commanded from only while at most '
+                    'this many publishers feed `measured_joint_states`, as the node sees them '
+                    '(`measured_state_publishers` in `/diagnostics`); with more, every measured '
+                    'state is rejected (`publishers`), `/diagnostics` says ERROR and after '
+                    '`measurement_timeout` `timeout_behavior` applies: a stale recording or a '
+                    'second plant never takes over the controller. 0: any number'),
+    NodeParameter(
+        'inactive_period', 'double', 0.1, 'number', unit='s', low=1e-3, high=3600.0,
+        special=(0.0, 'once'),
+        description='`managed:=true`: while the node is inactive (after `deactivate`) the '
+                    "command of `timeout_behavior` is published again every this many s, as a "
+                    'drive holds with its brakes: a plant that zeroes its efforts when commands '
+                    "stop (cog_sim_node's `effort_timeout`) is still held; `zero` is said in "
+                    'the log as the plant falling. 0: once, at deactivate, then nothing'),
+    NodeParameter(
         'managed', 'bool', False, 'bool',
         description='a lifecycle node (`~/change_state`, `~/get_state`): it starts '
                     'unconfigured; `configure` loads the mechanism and compiles its kernels, '
                     '`activate` opens the stream (nothing is published before), `deactivate` '
-                    "publishes `timeout_behavior`'s command once and then nothing, `cleanup` "
-                    'releases what configure made. false: the node serves from the start'),
+                    "publishes `timeout_behavior`'s command, again every `inactive_period`, "
+                    '`cleanup` releases what configure made, `shutdown` ends the process. '
+                    'false: the node serves from the start'),
 )
 
 #: rows of the docs' table for parameters the node does not declare from NODE_PARAMETERS:

@@ -14,6 +14,7 @@ provides ``internal_error(where, exc)``: the refusal is a guarded callback
 """
 import contextlib
 from typing import Any, Callable, Iterator, Mapping, Sequence
+import warnings
 
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
@@ -21,7 +22,7 @@ import rclpy.exceptions
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..core import MechanismConfigError
+from ..core import AssemblyWarning, MechanismConfigError
 from .diagnostics import PythonLogsToRos, guarded
 from .parameters import MAX_QOS_DEPTH, QOS_OVERRIDE_VALUES, NodeParameter
 
@@ -69,7 +70,11 @@ class ReadOnlyNode(Node):
                 for name, param in self._parameter_overrides.items()}
 
     def declare_read_only(self, name: str, value: Any, description: str) -> None:
-        """Declare ``name`` read-only with ``value`` (an empty list: no type, dynamic)."""
+        """Declare ``name`` read-only with ``value`` (an empty list: no type, dynamic). One
+        already declared stays as it is: a managed node's configure that failed after it
+        declared some parameters may be tried again (the values given cannot change)."""
+        if self.has_parameter(name):
+            return
         if isinstance(value, (list, tuple)) and len(value) == 0:
             self.declare_parameter(name, None, ParameterDescriptor(
                 read_only=True, dynamic_typing=True, description=description),
@@ -163,6 +168,8 @@ class ReadOnlyNode(Node):
         reason (:meth:`refuse_changes`).
         """
         value = self.get_parameter('use_sim_time').value
+        if self.describe_parameter('use_sim_time').read_only:     # (a second configure)
+            return bool(value)
         self.undeclare_parameter('use_sim_time')
         self.declare_parameter('use_sim_time', bool(value), ParameterDescriptor(
             read_only=True, description='ROS time from /clock (read at start-up only)'),
@@ -206,6 +213,16 @@ class ReadOnlyNode(Node):
         if self._refusing:
             return self._refuse_parameter_changes(parameter_list)
         return super().set_parameters_atomically(parameter_list)
+
+
+@contextlib.contextmanager
+def assembly_warnings_logged() -> Iterator[None]:
+    """Around the load of the mechanism in a node: its AssemblyWarnings are not printed as
+    Python warnings (the node logs each, as a ROS warning, from ``assembly_warnings``:
+    printed both ways, every one came twice)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', AssemblyWarning)
+        yield
 
 
 def _shown(name: str) -> str:

@@ -19,6 +19,7 @@ import numpy as np
 from .config import NodeConfig
 from .conversions import JointSelector, Rejected, nearest_turn, setpoint_arrays, stamp_to_ns
 from .diagnostics import Counts
+from .lost_messages import LostMessages
 from .setpoint_filter import NANOSECONDS, SetpointFilter, StampError
 
 
@@ -50,7 +51,7 @@ class SetpointStream:
         self.last_time: float | None = None   # monotonic receipt time of the last accepted one
         self.stopped = True                   # no setpoint yet, or none for the timeout
         self._stamp_rejections = 0            # consecutive setpoints rejected for their stamp
-        self._last_sequence: int | None = None   # publication sequence number of the last one
+        self.lost = LostMessages(publisher_count)   # gaps in the publisher's numbers
         # the setpoint taken last, until the next one (accept() makes it part of the
         # stream): its stamp in ns (its receipt time when the header's is 0) and its
         # positions as received; (unstamped, positions served, velocities as received)
@@ -65,7 +66,7 @@ class SetpointStream:
         estimated); raises Rejected. ``info``: rclpy's message info (the publisher's
         sequence number counts lost ones, its source timestamp rejects stale ones)."""
         if info is not None:
-            self._count_lost(info.get('publication_sequence_number'))
+            self._count_lost(info)
             if self.max_age_ns:
                 self._check_age(info.get('source_timestamp'))
         received, v = setpoint_arrays(msg, self.selector)
@@ -164,18 +165,11 @@ class SetpointStream:
             f'{self.max_stamp_rejections} setpoints in a row stamped before the previous '
             f'accepted one ({exc}): the estimator restarts, this setpoint starts a new stream')
 
-    def _count_lost(self, sequence: int | None) -> None:
-        """Count setpoints lost before they were taken (the publisher's sequence numbers).
-
-        Counted only while a single publisher feeds the topic: rclpy does not say which
-        publisher a message came from, so several publishers' numbers cannot be told apart.
-        """
-        last = self._last_sequence
-        self._last_sequence = sequence
-        if sequence is None or last is None or sequence == last + 1:
-            return
-        if sequence > last + 1 and self.publisher_count() == 1:
-            lost = sequence - last - 1
+    def _count_lost(self, info: dict) -> None:
+        """Count setpoints lost before they were taken (:class:`.LostMessages`: the
+        publisher's sequence numbers, while a single publisher feeds the topic)."""
+        lost = self.lost.count(info)
+        if lost:
             self.counts.problem('setpoints_lost', lost)
             self.counts.warnings.warn('lost', f'{lost} setpoint(s) lost before the node could '
                                               'take them (subscription queue full, or the '

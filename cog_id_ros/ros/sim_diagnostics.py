@@ -34,6 +34,9 @@ SIM_DIAGNOSTIC_KEYS = {
     'closure_residual': 'largest closure equation residual at the simulated pose, m or rad',
     'efforts_accepted': 'effort messages accepted since start (both topics)',
     'efforts_rejected': 'effort messages rejected since start (sum of rejected.<reason>)',
+    'efforts_lost': 'effort messages the single publisher of a topic sent that never '
+                    'reached the node (gaps in its sequence numbers: a flood beyond the '
+                    'subscription queue, a stalled node)',
     'effort_clipped': 'accepted effort messages clipped to effort_limits',
     'effort_stream': "'no effort yet', 'receiving', or 'stopped (zero|hold)' after "
                      'effort_timeout',
@@ -58,6 +61,7 @@ class EffortCounts:
         self.warnings = warnings
         self.accepted = self.clipped = self.internal_errors = self.resets = 0
         self.rejected = collections.Counter(dict.fromkeys(EFFORT_REASONS, 0))
+        self.lost = 0                       # effort messages lost (gaps in sequence numbers)
         self.last_rejection = ''
         self.period_problems = 0            # rejections and clipping since the last report
 
@@ -67,6 +71,15 @@ class EffortCounts:
         self.last_rejection = f'{reason}: {text}'
         self.period_problems += 1
         self.warnings.warn(reason, f'{topic} rejected, not integrated ({reason}): {text}')
+
+    def count_lost(self, topic: str, lost: int) -> None:
+        """``lost`` effort messages of ``topic`` never reached the node: counted, warned."""
+        if lost:
+            self.lost += lost
+            self.period_problems += 1
+            self.warnings.warn('lost.' + topic, f'{lost} {topic} message(s) lost before the '
+                                                'node could take them (subscription queue '
+                                                'full, or the node was stalled)')
 
     def accept(self, clipped: bool) -> None:
         self.accepted += 1
@@ -125,6 +138,7 @@ class SimReport:
                   ('closure_residual', f'{integrator.residual:.3g}'),
                   ('efforts_accepted', counts.accepted),
                   ('efforts_rejected', sum(counts.rejected.values())),
+                  ('efforts_lost', counts.lost),
                   *((f'rejected.{reason}', n) for reason, n in counts.rejected.items()),
                   ('effort_clipped', counts.clipped),
                   ('effort_stream', node.hold.state()),
@@ -151,8 +165,8 @@ class SimReport:
             return DiagnosticStatus.ERROR, (f'integration stopped ({integrator.error_reason}): '
                                             f'{integrator.error}; call ~/reset')
         if problems:
-            return DiagnosticStatus.WARN, (f'{problems} effort message(s) rejected or clipped, '
-                                           'or internal errors, in the last period')
+            return DiagnosticStatus.WARN, (f'{problems} effort message(s) rejected, clipped '
+                                           'or lost, or internal errors, in the last period')
         if node.diagnostics.same_name_nodes > 1 or joint_states_publishers > 1:
             return DiagnosticStatus.WARN, ('another node publishes joint_states here, or has '
                                            "this node's name")

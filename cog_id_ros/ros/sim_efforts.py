@@ -94,6 +94,7 @@ class EffortHold:
         self.efforts = [0.0] * self.size
         self.received_at: float | None = None     # simulated time of the last accepted
         self.stopped = False
+        self.accepted = 0                         # messages accepted since then
 
     def accept(self, efforts: list[float], now: float) -> bool:
         """Hold ``efforts`` (checked) from simulated time ``now`` on; True if clipped."""
@@ -104,6 +105,7 @@ class EffortHold:
             if clipped:
                 efforts = tau.tolist()
         self.efforts, self.received_at, self.stopped = efforts, now, False
+        self.accepted += 1
         return clipped
 
     def acting(self, now: float) -> list[float]:

@@ -34,7 +34,8 @@ MAX_LAG = 0.1
 #: s of wall time the thread sleeps at most at once (it wakes at once for a request)
 MAX_SLEEP = 0.1
 #: s of wall time between the publications of the held state while ``wait_for_effort``
-#: holds the simulation before its first effort (sim_parameters' text says the same)
+#: holds the simulation before its first effort, or lockstep waits for the next one
+#: (sim_parameters' text says the same)
 HELD_STATE_PERIOD = 0.1
 #: s of wall time the thread sleeps at once while it waits for the first effort
 EFFORT_POLL = 0.001
@@ -117,10 +118,13 @@ class Integrator:
 
     def __init__(self, simulation: Any, hold: EffortHold, lock: threading.Lock,
                  outputs: StateOutputs, every: int, logger: Any,
-                 wait_for_effort: bool = False) -> None:
+                 wait_for_effort: bool = False, lockstep: bool = False) -> None:
         self.simulation, self.hold, self.lock = simulation, hold, lock
         self.outputs, self.every, self.logger = outputs, every, logger
         self.wait_for_effort = wait_for_effort
+        #: lockstep: a step only once an effort was accepted after the last one
+        self.lockstep = lockstep
+        self._stepped_on = 0        # hold.accepted at the last step (lockstep)
         self.error: str | None = None
         self.error_reason = ''
         self.stops = 0              # times an error stopped the integration
@@ -142,6 +146,10 @@ class Integrator:
         or the last reset."""
         return self.wait_for_effort and self.hold.received_at is None
 
+    def awaits_effort(self) -> bool:
+        """Lockstep: no effort accepted since the last step (the next step waits for it)."""
+        return self.lockstep and self.hold.accepted <= self._stepped_on
+
     def republish(self) -> None:
         """The held state again, as it is (at its own stamp), and the clock."""
         self.outputs.publish_clock(self.stamp_ns)
@@ -156,6 +164,7 @@ class Integrator:
         it here, and nothing that is not finite is published)."""
         with self.lock:
             tau = self.hold.acting(self.time)
+            self._stepped_on = self.hold.accepted
         sim = self.simulation
         try:
             sim.step(tau)
@@ -194,6 +203,7 @@ class Integrator:
         self.simulation.reset()
         with self.lock:
             self.hold.reset()
+            self._stepped_on = 0
         self.error, self.error_reason = None, ''
         self._snapshot()
         self.begin()
@@ -236,6 +246,10 @@ class SimLoop:
             return False
         return self.failure is not None or not (self._stopping or not self.context.ok())
 
+    def wake(self) -> None:
+        """An effort was accepted: a lockstep step may be due now."""
+        self._wake.set()
+
     def request_reset(self) -> tuple[bool, str]:
         """Have the thread reset the simulation between two steps; (success, message)."""
         if self._thread is None or not self._thread.is_alive():
@@ -272,6 +286,9 @@ class SimLoop:
             if integrator.waiting():
                 self._hold_state()
                 continue
+            if integrator.awaits_effort():
+                self._await_effort()
+                continue
             wait = pacer.wait()
             if wait > 0.0:
                 self._sleep(min(wait, MAX_SLEEP))
@@ -286,6 +303,8 @@ class SimLoop:
             pacer.stepped()
             if wake.is_set():
                 wake.clear()
+            if integrator.lockstep:
+                self._held_published = time.monotonic()
 
     def _hold_state(self) -> None:
         """wait_for_effort: no step before the first effort; the held state published
@@ -296,6 +315,16 @@ class SimLoop:
             self.integrator.republish()
         self._sleep(EFFORT_POLL)
         self.pacer.restart()
+
+    def _await_effort(self) -> None:
+        """Lockstep: no step before the next effort; the state published again every
+        HELD_STATE_PERIOD s meanwhile (a controller that missed it, or started late, gets
+        a state to answer, so neither side waits for the other for ever)."""
+        now = time.monotonic()
+        if now - self._held_published >= HELD_STATE_PERIOD:
+            self._held_published = now
+            self.integrator.republish()
+        self._sleep(HELD_STATE_PERIOD)     # woken at once by the next accepted effort
 
     def _sleep(self, seconds: float) -> None:
         if self._wake.wait(seconds):

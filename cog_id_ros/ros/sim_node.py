@@ -31,14 +31,15 @@ from .command_line import urdf_base_dir
 from .config import NodeConfig
 from .conversions import JointSelector
 from .diagnostics import DiagnosticsPublisher, ThrottledWarnings, guarded
+from .lost_messages import LostMessages
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
-from .read_only_node import ReadOnlyNode
+from .read_only_node import ReadOnlyNode, assembly_warnings_logged
 from .sim_diagnostics import EffortCounts, SimReport
 from .sim_efforts import EffortHold, EffortRejected, command_efforts, named_efforts
 from .sim_loop import Integrator, Pacer, SimLoop, StateOutputs
 from .sim_parameters import SIM_PARAMETERS
 from .sim_topics import SIM_TOPICS, clock_qos
-from .topics import control_qos
+from .topics import control_qos, stream_qos
 
 NODE_NAME = 'cog_sim_node'
 
@@ -59,7 +60,7 @@ class CogSimNode(ReadOnlyNode):
         overrides = self.override_values()
         base_dir = urdf_base_dir(command_line, self.get_name()) \
             if 'mechanism.urdf_file' in overrides else None
-        with interruptible():
+        with interruptible(), assembly_warnings_logged():
             self.mechanism = Mechanism.from_parameters(self.declare_given(
                 overrides, is_mechanism_parameter, 'mechanism (read at start-up)'),
                 base_dir=base_dir)
@@ -82,9 +83,11 @@ class CogSimNode(ReadOnlyNode):
         self.selector = JointSelector(active)
         with self.qos_overrides_honoured(overrides):
             outputs = self._create_topics()
-        every = max(1, round(config.joint_states_period / config.time_step))
+        every = 1 if config.lockstep else \
+            max(1, round(config.joint_states_period / config.time_step))
         self.integrator = Integrator(self.simulation, self.hold, self.lock, outputs, every,
-                                     self.get_logger(), config.wait_for_effort)
+                                     self.get_logger(), config.wait_for_effort,
+                                     config.lockstep)
         self.pacer = Pacer(config.time_step, config.real_time_factor)
         self.loop = SimLoop(self.integrator, self.pacer, self.context, self.get_logger(),
                             self.internal_error)
@@ -105,12 +108,15 @@ class CogSimNode(ReadOnlyNode):
                                       event_callbacks=lean) \
             if self.config.publish_clock else None
         self.diagnostics = DiagnosticsPublisher(self, lean)
-        self.create_subscription(Float64MultiArray, SIM_TOPICS['effort_command'].name,
-                                 self.on_effort_command, control_qos(),
-                                 qos_overriding_options=qos_options())
-        self.create_subscription(JointState, SIM_TOPICS['joint_effort_command'].name,
-                                 self.on_joint_effort_command, control_qos(),
-                                 qos_overriding_options=qos_options())
+        subscriptions = {
+            topic: self.create_subscription(msg_type, SIM_TOPICS[topic].name, callback,
+                                            stream_qos(), qos_overriding_options=qos_options())
+            for topic, msg_type, callback in (
+                ('effort_command', Float64MultiArray, self.on_effort_command),
+                ('joint_effort_command', JointState, self.on_joint_effort_command))}
+        #: per effort topic, the gaps in its single publisher's sequence numbers
+        self.lost = {topic: LostMessages(sub.get_publisher_count)
+                     for topic, sub in subscriptions.items()}
         self.create_service(Trigger, SIM_TOPICS['~/reset'].name, self.on_reset)
         joints = self.mechanism.joints
         return StateOutputs(joints, [joints.index(j) for j in self.config.active_joints],
@@ -126,6 +132,7 @@ class CogSimNode(ReadOnlyNode):
                 f'joint_states every {every} step(s)'
                 f"{'; /clock published' if config.publish_clock else ''}"
                 f"{'; the state held until the first effort' if config.wait_for_effort else ''}"
+                f"{'; lockstep: one step per effort message' if config.lockstep else ''}"
                 f'; effort timeout {config.effort_timeout:g} s '
                 f'({config.effort_timeout_behavior})')
 
@@ -159,16 +166,22 @@ class CogSimNode(ReadOnlyNode):
     # --- efforts -----------------------------------------------------------------------------
 
     @guarded
-    def on_effort_command(self, msg: Float64MultiArray) -> None:
-        """Efforts in active_joints order: held from the next step on, or rejected."""
-        self._take('effort_command', command_efforts, msg, self.config.active_joints)
+    def on_effort_command(self, msg: Float64MultiArray, info: dict) -> None:
+        """Efforts in active_joints order: held from the next step on, or rejected
+        (``info``: rclpy's message info: lost messages are counted)."""
+        self._take('effort_command', command_efforts, msg, self.config.active_joints, info)
 
     @guarded
-    def on_joint_effort_command(self, msg: JointState) -> None:
+    def on_joint_effort_command(self, msg: JointState, info: dict) -> None:
         """Efforts by joint name: held from the next step on, or rejected."""
-        self._take('joint_effort_command', named_efforts, msg, self.selector)
+        self._take('joint_effort_command', named_efforts, msg, self.selector, info)
 
-    def _take(self, topic: str, read: Callable[..., list[float]], msg: Any, joints: Any) -> None:
+    def _take(self, topic: str, read: Callable[..., list[float]], msg: Any, joints: Any,
+              info: dict) -> None:
+        lost = self.lost[topic].count(info)
+        if lost:
+            with self.lock:
+                self.counts.count_lost(topic, lost)
         try:
             efforts = read(msg, joints, self.config.max_effort)
         except EffortRejected as exc:
@@ -177,6 +190,8 @@ class CogSimNode(ReadOnlyNode):
             return
         with self.lock:
             self.counts.accept(self.hold.accept(efforts, self.integrator.time))
+        if self.config.lockstep:
+            self.loop.wake()
 
     # --- reset and diagnostics ---------------------------------------------------------------
 

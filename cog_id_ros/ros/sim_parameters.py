@@ -64,6 +64,17 @@ SIM_PARAMETERS: dict[str, NodeParameter] = _table(
                     'can answer; false: the integration starts at once, with zero effort '
                     'until the first message'),
     NodeParameter(
+        'lockstep', 'bool', False, 'bool',
+        description='one step per effort message: `joint_states` after every step, then the '
+                    'next step only once an effort message was accepted after it, whatever '
+                    'the load of the machine (a controller that answers each measured state '
+                    'closes the loop in lockstep with the simulation; `real_time_factor` still '
+                    'caps the rate, 0: as fast as both go). The safe way to close a simulated '
+                    'loop on a busy machine: no measured state times out, no step runs on an '
+                    'old command. While it waits, the state is published again (same stamp) '
+                    f'every {0.1:g} s of wall time, so that a controller that missed it or '
+                    'started later answers. false: steps are paced by `real_time_factor` alone'),
+    NodeParameter(
         'effort_timeout', 'double', 0.5, 'number', unit='s', low=1e-6, high=3600.0,
         special=(0.0, 'never'),
         description='s of simulated time after the last accepted effort message at which '

@@ -15,7 +15,8 @@ import sys
 from typing import Any
 
 from .parameters import docs_main
-from .topics import CONTROL_QOS_DEPTH, DIAGNOSTICS_QOS_DEPTH, TOPICS, Topic
+from .topics import STREAM, TOPICS, Topic
+from .topics import qos_text as node_qos_text
 
 _CONTROL = 'control'
 CLOCK = 'clock'
@@ -32,12 +33,12 @@ def clock_qos() -> Any:
 
 #: the simulator's topics and its service, in the order they are documented
 SIM_TOPICS: dict[str, Topic] = {t.name: t for t in (
-    Topic('effort_command', 'std_msgs/Float64MultiArray', 'in', _CONTROL,
+    Topic('effort_command', 'std_msgs/Float64MultiArray', 'in', STREAM,
           'efforts, one per active joint in `mechanism.active_joints` order (`layout` '
           "ignored): cog_id_node's `effort_command`, no remap needed. Checked, then held "
           'from the next step on (zero-order hold; the newest accepted message wins); a '
           'rejected one is counted and never integrated'),
-    Topic('joint_effort_command', 'sensor_msgs/JointState', 'in', _CONTROL,
+    Topic('joint_effort_command', 'sensor_msgs/JointState', 'in', STREAM,
           'the same with names: `name` must hold every active joint once (any order; '
           'other names ignored), `effort` one entry per name; `position` and `velocity` '
           'ignored'),
@@ -59,13 +60,11 @@ SIM_TOPICS: dict[str, Topic] = {t.name: t for t in (
 
 
 def qos_text(topic: Topic) -> str:
-    if topic.qos == _CONTROL:
-        return f'reliable, keep-last {CONTROL_QOS_DEPTH}, volatile (overridable)'
     if topic.qos == CLOCK:
         return 'reliable, keep-last 1, volatile'
     if topic.qos == SERVICE:
         return "rclpy's services default"
-    return f'reliable, keep-last {DIAGNOSTICS_QOS_DEPTH}'
+    return node_qos_text(topic)
 
 
 def markdown_table() -> str:

@@ -108,7 +108,8 @@ def cannot_start(name: str, why: str) -> int:
 def _spin(executor: SingleThreadedExecutor, node: Any, stop: stop_signals.DeferredStop
           ) -> None:
     """executor.spin(), except that an exception out of a callback does not end it, and a
-    stop signal ends it within STOP_POLL s even when rclpy's handler did not wake it.
+    stop signal ends it within STOP_POLL s even when rclpy's handler did not wake it; so
+    does a node that is ``finished`` (a managed node shut down: finalized).
 
     Every callback of the node is guarded (:func:`.diagnostics.guarded`); this catches
     what is left, e.g. an exception rclpy raises around a callback, counts and logs it,
@@ -118,7 +119,7 @@ def _spin(executor: SingleThreadedExecutor, node: Any, stop: stop_signals.Deferr
     So the wait has a timeout, and the stop noted by :class:`.stop_signals.DeferredStop`
     (its Python handler stays installed under rclpy's) is looked at between two waits.
     """
-    while rclpy.ok() and stop.received is None:
+    while rclpy.ok() and stop.received is None and not getattr(node, 'finished', False):
         try:
             executor.spin_once(timeout_sec=STOP_POLL)
         except ExternalShutdownException:

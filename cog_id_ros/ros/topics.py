@@ -36,10 +36,24 @@ def control_qos() -> 'QoSProfile':
                       reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
+def stream_qos() -> 'QoSProfile':
+    """The QoS of the control-rate inputs (setpoints, measured states, efforts): best
+    effort, keep-last CONTROL_QOS_DEPTH, volatile. Best effort because a reliable reader
+    that missed samples (its process stopped, a starved core) delivers nothing newer until
+    the writer's next heartbeat has filled the gap (up to seconds, as the writer is set):
+    it matches reliable and best-effort publishers alike, and every sample it missed is
+    counted from the publisher's sequence numbers (``*_lost`` in diagnostics)."""
+    from rclpy.qos import ReliabilityPolicy
+    qos = control_qos()
+    qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    return qos
+
+
 @dataclasses.dataclass(frozen=True)
 class Topic:
-    """One topic of the node. ``qos``: 'control' (:func:`control_qos`, overridable) or
-    'diagnostics' (keep-last DIAGNOSTICS_QOS_DEPTH, not overridable)."""
+    """One topic of the node. ``qos``: 'control' (:func:`control_qos`, overridable),
+    'stream' (:func:`stream_qos`, overridable) or 'diagnostics' (keep-last
+    DIAGNOSTICS_QOS_DEPTH, not overridable)."""
 
     name: str
     type: str
@@ -49,10 +63,12 @@ class Topic:
 
 
 _CONTROL = 'control'
+#: the control-rate inputs: :func:`stream_qos`
+STREAM = 'stream'
 
 #: the node's topics, in the order they are documented
 TOPICS: dict[str, Topic] = {t.name: t for t in (
-    Topic('joint_setpoint', 'sensor_msgs/JointState', 'in', _CONTROL,
+    Topic('joint_setpoint', 'sensor_msgs/JointState', 'in', STREAM,
           'names must include every active joint (any order; extra names ignored); '
           '`position` required; `velocity` optional (empty: estimated, see "Setpoints: the '
           'acceleration estimator"); `effort` ignored'),
@@ -86,7 +102,7 @@ TOPICS: dict[str, Topic] = {t.name: t for t in (
 
 #: topics of the feedback modes (control_mode other than feedforward) only
 FEEDBACK_TOPICS: dict[str, Topic] = {t.name: t for t in (
-    Topic('measured_joint_states', 'sensor_msgs/JointState', 'in (feedback modes)', _CONTROL,
+    Topic('measured_joint_states', 'sensor_msgs/JointState', 'in (feedback modes)', STREAM,
           "the robot's measured state (remap it to the robot's `/joint_states`): names must "
           'include every active joint (any order; extra names ignored); `position` required, '
           '`velocity` required except in `gravity_compensation`; each one accepted gets one '
@@ -100,6 +116,8 @@ FEEDBACK_TOPICS: dict[str, Topic] = {t.name: t for t in (
 def qos_text(topic: Topic) -> str:
     if topic.qos == _CONTROL:
         return f'reliable, keep-last {CONTROL_QOS_DEPTH}, volatile (overridable)'
+    if topic.qos == STREAM:
+        return f'best effort, keep-last {CONTROL_QOS_DEPTH}, volatile (overridable)'
     return f'reliable, keep-last {DIAGNOSTICS_QOS_DEPTH}'
 
 

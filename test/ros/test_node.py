@@ -175,7 +175,8 @@ def nodes(ros_process, rclpy_context, tmp_path_factory):
                         '-r', 'effort_command:=/c_controller/commands'),
         'd': start_node(ros_process, str(non_grashof), '/d', '-p', 'setpoint_timeout:=0.0',
                         '-p',
-                        'qos_overrides./d/joint_trajectory.subscription.reliability:=best_effort'),
+                        'qos_overrides./d/joint_trajectory.subscription.reliability:=best_effort',
+                        '-p', 'qos_overrides./d/joint_setpoint.subscription.reliability:=reliable'),
     }
     probes = {k: Probe(rclpy_context, f'/{k}', f'probe_{k}',
                        commands='/c_controller/commands' if k == 'c' else 'effort_command')
@@ -565,7 +566,8 @@ def test_effort_limits_clip_and_timeout_holds_the_last_pose(nodes):
 # --- ROS plumbing --------------------------------------------------------------------------
 
 def test_qos_override_applies_to_its_topic_only(nodes):
-    """-p qos_overrides./d/joint_trajectory.subscription.reliability:=best_effort."""
+    """-p qos_overrides./d/joint_trajectory.subscription.reliability:=best_effort, and
+    joint_setpoint's made reliable (best effort by default, as /a shows)."""
     _, probes = nodes
     node = probes['d'].node
     assert wait_until(lambda: node.get_subscriptions_info_by_topic('/d/joint_trajectory'))
@@ -575,12 +577,40 @@ def test_qos_override_applies_to_its_topic_only(nodes):
     assert info[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
     info = node.get_publishers_info_by_topic('/d/effort_command')
     assert info[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
+    info = node.get_subscriptions_info_by_topic('/a/joint_setpoint')
+    assert info[0].qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    info = node.get_subscriptions_info_by_topic('/a/joint_trajectory')
+    assert info[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
+
+
+def test_a_best_effort_setpoint_publisher_is_served(nodes):
+    """joint_setpoint's subscription is best effort (docs/node.md, QoS): a publisher
+    with SensorDataQoS reaches it as a reliable one does."""
+    from rclpy.qos import qos_profile_sensor_data
+    _, probes = nodes
+    probe = probes['a']
+    sensor = probe.node.create_publisher(JointState, 'joint_setpoint', qos_profile_sensor_data)
+    try:
+        assert wait_until(lambda: sensor.get_subscription_count() > 0)
+        sent = []
+
+        def answered():             # a fresh stamp each time (a repeated one is rejected)
+            msg = JointState()
+            sent.append(fresh_stamp())
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(sent[-1], NS)
+            msg.name, msg.position = ['joint3'], [1.5]
+            sensor.publish(msg)
+            time.sleep(0.05)
+            return any(probe.effort_at(stamp) is not None for stamp in sent)
+        assert wait_until(answered)
+    finally:
+        probe.node.destroy_publisher(sensor)
 
 
 def test_incompatible_setpoint_publisher_is_reported_and_good_ones_still_served(nodes):
-    """A best-effort publisher cannot reach the reliable joint_setpoint subscription: the
-    node logs the mismatch (the subscription's QoS events are served by the setpoint
-    thread, beside its messages) and goes on serving the reliable publishers."""
+    """A best-effort publisher cannot reach a joint_setpoint subscription made reliable
+    (/d): the node logs the mismatch (the subscription's QoS events are served by the
+    setpoint thread, beside its messages) and goes on serving the reliable publishers."""
     procs, probes = nodes
     probe = probes['d']
     qos = control_qos()
@@ -636,7 +666,7 @@ def test_diagnostics_report_counts_residual_condition_and_compute_time(nodes):
                        'unreachable', 'singular', 'inconsistent', 'jump', 'out_of_range'):
             assert int(kv[f'rejected.{reason}']) == EXPECTED_REJECTIONS[key][reason], (key, reason)
         assert int(kv['setpoints_rejected']) == sum(EXPECTED_REJECTIONS[key].values())
-        assert int(kv['setpoints_accepted']) > 0
+        assert int(kv['setpoints_accepted']) > 0, key
         assert float(kv['last_closure_residual']) < 1e-9
         assert 1.0 <= float(kv['closure_condition_number']) < 1e6
         assert 0.0 < float(kv['compute_time_median_us']) <= float(kv['compute_time_max_us'])
