@@ -1,10 +1,13 @@
-/* One Simulation step in C: cog_id_ros/core/simulation.py's RK4 over the kernels above
+/* One Simulation substep in C: cog_id_ros/core/simulation.py's RK4 over the kernels above
    (body_prediction, body_closure, body_forward), for the case the Python step takes most
-   often: every stage one continuation step from the step's start, closed by Newton, not
-   singular. The same operations in the same order as the Python step, so the same numbers;
-   anything else (a stage that needs continuation, a failure to report) returns None and
-   the Python step does it. Emitted by cog_id_ros.core.native_simulation (SIM_* defined
-   there): do not edit a generated copy. */
+   often: every stage one continuation step from the substep's start, closed by Newton, not
+   singular; and its error estimate and branch check (simulation_error.py's step_error).
+   The same operations in the same order as the Python step, so the same numbers; anything
+   else (a stage that needs continuation, a failure to report) returns None and the Python
+   step does it. Emitted by cog_id_ros.core.native_simulation (SIM_* defined there): do not
+   edit a generated copy. */
+
+#include <float.h>
 
 /* the stage record: every field of the forward kernel's record */
 typedef struct {
@@ -136,14 +139,76 @@ static int sim_stage(const double *q0, const double *basis0, const double *z,
     return 1;
 }
 
-/* rk4_step(q, basis, zd, tau, k1, cfg): one step (simulation.py), or None where the Python
-   step must do it. k1: the primary accelerations at the start with these efforts, or None.
-   cfg: [time step, closure tolerance, max condition number, inertia limit, joint step
-   limits (n), correction bounds (n)]. Returns (q, basis rows, zd, accelerations, worst). */
+/* the larger of x and acc, NaN once NaN (simulation_error._larger) */
+static double sim_larger(double x, double acc)
+{
+    return (x > acc || x != x) ? x : acc;
+}
+
+/* row . v over the primary actuators, the first product first (simulation_error._dot) */
+static double sim_dot(const double *row, const double *v)
+{
+    double s = row[0] * v[0];
+    for (int k = 1; k < SIM_DOF; k++)
+        s = s + row[k] * v[k];
+    return s;
+}
+
+/* simulation_error.step_error, its operations in its order: out = (error estimate, branch
+   mismatch, motion, speed) of the substep of length h from (q0, basis0, zd) to (p,
+   zd_new); zd4, k4 the fourth stage's rates and accelerations; scales, floor_: the joints'
+   units */
+static void sim_error(double h, const double *q0, const double *basis0, const double *zd,
+                      const sim_pose *p, const double *zd_new, const double *zd4,
+                      const double *k4, const double *scales, double floor_, double *out)
+{
+    const double sixth = h / 6.0, half = 0.5 * h;
+    double dz[SIM_DOF], dv[SIM_DOF];
+    for (int k = 0; k < SIM_DOF; k++) {
+        dz[k] = sixth * (zd4[k] - zd_new[k]);
+        dv[k] = sixth * (k4[k] - p->rec[SIM_OFF_ACC + sim_primary_active[k]]);
+    }
+    double position = 0.0, velocity = 0.0, speed = 0.0, mismatch = 0.0, motion = 0.0;
+    for (int j = 0; j < SIM_N; j++) {
+        const double *row0 = basis0 + j * SIM_DOF, *row1 = p->basis + j * SIM_DOF;
+        const double u = scales[j];
+        double r0 = sim_dot(row0, zd), r1 = sim_dot(row1, zd_new);
+        position = sim_larger(fabs(sim_dot(row1, dz)) * u, position);
+        velocity = sim_larger(fabs(sim_dot(row1, dv)) * u, velocity);
+        speed = sim_larger(fabs(r0) * u, speed);
+        speed = sim_larger(fabs(r1) * u, speed);
+        double d = p->q[j] - q0[j];
+        motion = sim_larger(fabs(d) * u, motion);
+        mismatch = sim_larger(fabs(d - half * (r0 + r1)) * u, mismatch);
+    }
+    out[0] = sim_larger(velocity / (speed + floor_), position);
+    out[1] = mismatch;
+    out[2] = motion;
+    out[3] = speed;
+}
+
+/* the largest rounding measure of the evaluations so far (simulation_error.rounding):
+   (s + eps) kappa^2 + eps kappa_H, s the Newton increment left at the pose */
+static double sim_rounding(const double *rec, double largest)
+{
+    const double kappa = rec[SIM_OFF_COND];
+    return sim_larger((rec[SIM_OFF_LARGEST] + DBL_EPSILON) * kappa * kappa +
+                      DBL_EPSILON * rec[SIM_OFF_INERTIA], largest);
+}
+
+/* rk4_step(q, basis, zd, tau, k1, cfg): one substep (simulation.py), or None where the
+   Python step must do it. k1: the primary accelerations at the start with these efforts, or
+   None. cfg: [substep, closure tolerance, max condition number, inertia limit, joint step
+   limits (n), correction bounds (n), unit scales (n), speed floor] (native_simulation's
+   step_config). Returns the fields of
+   simulation_error.Substep: (q, basis rows, zd, accelerations, worst, condition, inertia
+   condition, error estimate, branch mismatch, motion, speed, the largest rounding measure
+   (sim_rounding) of the evaluations at its ends (k1 when evaluated, k4, k5) and between
+   them (k2, k3), its largest primary acceleration in joint units). */
 static PyObject *sim_rk4_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    double q0[SIM_N], basis0[SIM_N * SIM_DOF], zd[SIM_DOF], tau[SIM_M], k[4][SIM_DOF];
-    double cfg[4 + 2 * SIM_N];
+    double q0[SIM_N], basis0[SIM_N * SIM_DOF], zd[SIM_DOF], tau[SIM_M], k[5][SIM_DOF];
+    double cfg[5 + 3 * SIM_N], error[4], ends = 0.0, inside = 0.0, scale = 0.0;
     if (nargs != 6) {
         PyErr_SetString(PyExc_TypeError, "rk4_step() takes 6 arguments");
         return NULL;
@@ -152,9 +217,9 @@ static PyObject *sim_rk4_step(PyObject *self, PyObject *const *args, Py_ssize_t 
             read_rows(args[1], basis0, SIM_N, SIM_DOF, "basis") < 0 ||
             read_doubles(args[2], zd, SIM_DOF, "zd") < 0 ||
             read_doubles(args[3], tau, SIM_M, "tau") < 0 ||
-            read_doubles(args[5], cfg, 4 + 2 * SIM_N, "cfg") < 0)
+            read_doubles(args[5], cfg, 5 + 3 * SIM_N, "cfg") < 0)
         return NULL;
-    const double h = cfg[0], *stage_cfg = cfg + 1;
+    const double h = cfg[0], *stage_cfg = cfg + 1, *scales = cfg + 4 + 2 * SIM_N;
     sim_pose p;
     double z[SIM_DOF], zs[SIM_DOF], zds[4][SIM_DOF];
     for (int i = 0; i < SIM_DOF; i++)
@@ -170,6 +235,7 @@ static PyObject *sim_rk4_step(PyObject *self, PyObject *const *args, Py_ssize_t 
         body_forward(q0, target, rates, tau, p.rec);
         if (!sim_checked(p.rec, stage_cfg))
             Py_RETURN_NONE;
+        ends = sim_rounding(p.rec, ends);
         for (int i = 0; i < SIM_DOF; i++)
             k[0][i] = p.rec[SIM_OFF_ACC + sim_primary_active[i]];
     }
@@ -183,6 +249,10 @@ static PyObject *sim_rk4_step(PyObject *self, PyObject *const *args, Py_ssize_t 
         }
         if (!sim_stage(q0, basis0, zs, zds[s], tau, stage_cfg, &p))
             Py_RETURN_NONE;
+        if (s < 3)
+            inside = sim_rounding(p.rec, inside);
+        else
+            ends = sim_rounding(p.rec, ends);
         for (int i = 0; i < SIM_DOF; i++)
             k[s][i] = p.rec[SIM_OFF_ACC + sim_primary_active[i]];
     }
@@ -194,14 +264,29 @@ static PyObject *sim_rk4_step(PyObject *self, PyObject *const *args, Py_ssize_t 
     }
     if (!sim_stage(q0, basis0, zs, zd_new, tau, stage_cfg, &p))
         Py_RETURN_NONE;
-    PyObject *out[5] = {floats(p.q, SIM_N), rows(p.basis, SIM_N, SIM_DOF),
-                        floats(zd_new, SIM_DOF), floats(p.rec + SIM_OFF_ACC, SIM_M),
-                        PyFloat_FromDouble(p.rec[SIM_OFF_WORST])};
-    for (int i = 0; i < 5; i++)
-        if (out[i] == NULL) {
-            for (int j = 0; j < 5; j++)
-                Py_XDECREF(out[j]);
+    ends = sim_rounding(p.rec, ends);
+    for (int i = 0; i < SIM_DOF; i++)
+        k[4][i] = p.rec[SIM_OFF_ACC + sim_primary_active[i]];
+    for (int s = 0; s < 5; s++)        /* simulation_error.acceleration_scale */
+        for (int i = 0; i < SIM_DOF; i++)
+            scale = sim_larger(fabs(k[s][i]) * scales[sim_primary_joint[i]], scale);
+    sim_error(h, q0, basis0, zd, &p, zd_new, zds[3], k[3], scales, cfg[4 + 3 * SIM_N], error);
+    double numbers[10] = {p.rec[SIM_OFF_WORST], p.rec[SIM_OFF_COND], p.rec[SIM_OFF_INERTIA],
+                          error[0], error[1], error[2], error[3], ends, inside, scale};
+    PyObject *tuple = PyTuple_New(14);
+    if (tuple == NULL)
+        return NULL;
+    PyObject *items[4] = {floats(p.q, SIM_N), rows(p.basis, SIM_N, SIM_DOF),
+                          floats(zd_new, SIM_DOF), floats(p.rec + SIM_OFF_ACC, SIM_M)};
+    for (int i = 0; i < 14; i++) {
+        PyObject *item = i < 4 ? items[i] : PyFloat_FromDouble(numbers[i - 4]);
+        if (item == NULL) {
+            for (int j = i + 1; j < 4; j++)
+                Py_XDECREF(items[j]);
+            Py_DECREF(tuple);
             return NULL;
         }
-    return Py_BuildValue("(NNNNN)", out[0], out[1], out[2], out[3], out[4]);
+        PyTuple_SET_ITEM(tuple, i, item);     /* (steals the reference) */
+    }
+    return tuple;
 }

@@ -3,15 +3,17 @@
 simulation.py's RK4 step calls the kernels about fifteen times and decides in Python between
 the calls; for a small mechanism the deciding costs more than the kernels. With compiled
 kernels the library of the forward kernel (kernels.NativeKernels, loaded on first use)
-also holds ``rk4_step``, the same step in C for the case the Python step
+also holds ``rk4_step``, the same (sub)step in C for the case the Python step
 takes most often (every stage one continuation step away, closed by Newton, not singular),
-the same operations in the same order; otherwise it returns None and the Python step runs.
+with its error estimate (simulation_error.step_error), the same operations in the same
+order; otherwise it returns None and the Python step runs. The Python step divides a time
+step into substeps and calls it once per substep.
 This module writes the constants it is compiled with: the mechanism's sizes and joint
 indices, where each field sits in the kernels' flat outputs (kernels.layouts), and
 the Newton constants (newton.py).
 """
 from importlib import resources
-from typing import Dict, List, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from . import newton
 from .continuation import TWO_PI, wrapping_actuators
@@ -21,7 +23,8 @@ from .mechanism import Mechanism
 C_SIMULATION = 'kernels_simulation.c'
 
 #: the module function it adds: (name, doc)
-METHODS = [('rk4_step', 'one Simulation step, or None where the Python step must take it')]
+METHODS = [('rk4_step', 'one Simulation substep and its error estimate, or None where the '
+                         'Python step must take it')]
 
 
 def offsets(layout: Sequence[Tuple[str, tuple]]) -> Dict[str, int]:
@@ -74,9 +77,15 @@ def simulation_source(mechanism: Mechanism, layouts: Dict[str, List[Tuple[str, t
 
 
 def step_config(time_step: float, mechanism: Mechanism, inertia_limit: float,
-                limits: Sequence[float], bounds: Sequence[float]) -> List[float]:
-    """The ``cfg`` argument of rk4_step: [h, closure tolerance, max condition number,
-    inertia limit, joint step limits (n), Newton correction bounds (n)]."""
+                limits: Sequence[float], bounds: Sequence[float], scales: Sequence[float],
+                speed_floor: float, closure_tolerance: float,
+                condition_limit: Optional[float] = None) -> List[float]:
+    """The ``cfg`` argument of rk4_step: [h, ``closure_tolerance``, the condition number
+    accepted (``condition_limit``, else the mechanism's max_condition_number), inertia
+    limit, joint step limits (n), Newton correction bounds (n), the error norm's unit
+    scales (n), its speed floor (simulation_error.py)]."""
     m = mechanism
-    return [float(time_step), float(m.closure_tolerance), float(m.max_condition_number),
-            float(inertia_limit)] + [float(x) for x in limits] + [float(x) for x in bounds]
+    condition = m.max_condition_number if condition_limit is None else condition_limit
+    return ([float(time_step), float(closure_tolerance), float(condition),
+             float(inertia_limit)] + [float(x) for x in limits] +
+            [float(x) for x in bounds] + [float(x) for x in scales] + [float(speed_floor)])

@@ -32,6 +32,18 @@ SIM_DIAGNOSTIC_KEYS = {
     'lag_restarts': f'times the simulation fell more than {MAX_LAG:g} s behind its schedule and '
                     'went on from there instead of catching up',
     'closure_residual': 'largest closure equation residual at the simulated pose, m or rad',
+    'error_estimate_last': "the last step's error estimate (the Simulation's tolerance "
+                           'measure, docs/simulation.md: "Error control and diagnostics")',
+    'error_estimate_total': 'error estimates summed since start or the last reset',
+    'divided_steps': 'steps divided into substeps to keep the estimate within the tolerance',
+    'near_singular_substeps': 'substeps that passed close to a singular pose',
+    'inaccurate_substeps': 'substeps accepted with their rounding near a singular pose '
+                           'reported (not within the tolerance)',
+    'condition_number': 'condition number of the closure at the simulated pose',
+    'energy': 'kinetic plus potential energy of the model, J',
+    'work': "the efforts' work since start or the last reset, J",
+    'energy_drift': 'energy - energy at start - work: what the integration gained (or '
+                    'lost) on its own, J',
     'efforts_accepted': 'effort messages accepted since start (both topics)',
     'efforts_rejected': 'effort messages rejected since start (sum of rejected.<reason>)',
     'efforts_lost': 'effort messages the single publisher of a topic sent that never '
@@ -52,6 +64,14 @@ SIM_DIAGNOSTIC_KEYS = {
                                'joint_states_decimation to 0)',
     'last_rejection': 'reason and message of the last rejected effort message',
 }
+
+
+#: the keys taken from the Simulation's diagnostics: key -> its field
+_ACCURACY = {'error_estimate_last': 'error_estimate',
+             'error_estimate_total': 'total_error_estimate', 'divided_steps': 'divided_steps',
+             'near_singular_substeps': 'near_singular_substeps',
+             'inaccurate_substeps': 'inaccurate_substeps', 'condition_number': 'condition_number',
+             'energy': 'energy', 'work': 'work', 'energy_drift': 'energy_drift'}
 
 
 class EffortCounts:
@@ -136,6 +156,7 @@ class SimReport:
                   ('real_time_factor_achieved', achieved),
                   ('lag_restarts', node.pacer.lag_restarts),
                   ('closure_residual', f'{integrator.residual:.3g}'),
+                  *self._accuracy(),
                   ('efforts_accepted', counts.accepted),
                   ('efforts_rejected', sum(counts.rejected.values())),
                   ('efforts_lost', counts.lost),
@@ -152,6 +173,16 @@ class SimReport:
                   ('last_rejection', counts.last_rejection)]
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values]
         return status
+
+    def _accuracy(self) -> list[tuple[str, str]]:
+        """The Simulation's error estimates and energy, as taken by the integration thread
+        after a step (empty before the first step and after a reset); the next one asked."""
+        integrator = self.node.integrator
+        taken, _ = integrator.sim_diagnostics, integrator.want_diagnostics()
+        if taken is None:
+            return [(key, '') for key in _ACCURACY]
+        return [(key, f'{getattr(taken, field):.6g}' if isinstance(getattr(taken, field), float)
+                 else str(getattr(taken, field))) for key, field in _ACCURACY.items()]
 
     def _level(self, achieved: str, joint_states_publishers: int) -> tuple[bytes, str]:
         """The level and message: the worst of what the period saw."""

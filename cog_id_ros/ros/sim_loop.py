@@ -113,7 +113,8 @@ class Integrator:
     ``every``: steps between joint_states (the state at time 0 is published too). The
     attributes ``time``, ``steps``, ``residual`` (closure residual at ``time``) and
     ``error`` (None while it integrates; else why it stopped) are the snapshot the
-    executor reads.
+    executor reads; ``sim_diagnostics`` the Simulation's diagnostics (error estimates,
+    energy), taken after the first step that follows :meth:`want_diagnostics`.
     """
 
     def __init__(self, simulation: Any, hold: EffortHold, lock: threading.Lock,
@@ -128,7 +129,15 @@ class Integrator:
         self.error: str | None = None
         self.error_reason = ''
         self.stops = 0              # times an error stopped the integration
+        self.sim_diagnostics: Any = None
+        self._diagnostics_wanted = False
         self._snapshot()
+
+    def want_diagnostics(self) -> None:
+        """Have the integration thread take the Simulation's diagnostics after its next
+        step (the energies cost tens of microseconds to a millisecond: once a report, in
+        the thread that owns the Simulation)."""
+        self._diagnostics_wanted = True
 
     def _snapshot(self) -> None:
         sim = self.simulation
@@ -174,6 +183,9 @@ class Integrator:
         self.steps += 1
         self.time = time_now = sim.time
         self.residual = sim.closure_residual
+        if self._diagnostics_wanted:
+            self._diagnostics_wanted = False
+            self.sim_diagnostics = sim.diagnostics
         self.stamp_ns = stamp = round(time_now * NANOSECONDS)
         self.outputs.publish_clock(stamp)
         if self.steps % self.every == 0:
@@ -181,9 +193,8 @@ class Integrator:
         return True
 
     def _publish(self, efforts: Sequence[float]) -> bool:
-        sim = self.simulation
-        positions = sim.joint_positions().tolist()
-        velocities = sim.joint_velocities().tolist()
+        positions_, velocities_ = self.simulation.joint_state()      # one read-out
+        positions, velocities = positions_.tolist(), velocities_.tolist()
         if not (_finite(positions) and _finite(velocities)):
             self.stop('non_finite', f'the state is not finite at t = {self.time:.6g} s (efforts '
                                     f'{list(efforts)}): the motion diverged')
@@ -205,6 +216,7 @@ class Integrator:
             self.hold.reset()
             self._stepped_on = 0
         self.error, self.error_reason = None, ''
+        self.sim_diagnostics = None
         self._snapshot()
         self.begin()
         return 'reset: initial_positions at rest, time 0, no effort held'

@@ -73,7 +73,7 @@ class CogSimNode(ReadOnlyNode):
         self.make_use_sim_time_read_only()
         with interruptible():
             self.simulation = Simulation(self.mechanism, time_step=config.time_step,
-                                         backend=config.backend)
+                                         backend=config.backend, tolerance=config.tolerance)
         self.lock = threading.Lock()        # the held efforts and the counts
         self.counts = EffortCounts(ThrottledWarnings(self.get_logger(), config.warning_period))
         active = config.active_joints

@@ -38,6 +38,12 @@ SIM_PARAMETERS: dict[str, NodeParameter] = _table(
                     'Runge-Kutta on the independent coordinates, the efforts held over the '
                     'step, every passive joint solved from the closure (docs/simulation.md)'),
     NodeParameter(
+        'tolerance', 'double', 1e-7, 'number', low=1e-12, high=1e-2,
+        description="the Simulation's error tolerance per step: a step whose error estimate "
+                    'is above it is divided (the published step stays `time_step`); '
+                    '/diagnostics reports the estimates and the energy drift '
+                    '(docs/simulation.md, "Error control and diagnostics")'),
+    NodeParameter(
         'real_time_factor', 'double', 1.0, 'number', low=1e-3, high=1000.0,
         special=(0.0, 'as fast as possible'),
         description='simulated seconds per wall-clock second the node keeps to (1: real '

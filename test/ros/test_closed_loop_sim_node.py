@@ -129,8 +129,9 @@ def test_computed_torque_through_the_simulator_brings_the_error_down(ros_process
                 '-p', 'kd:=[40.0]')
     try:
         goal = pair.q0 + pair.scale(START)
-        pair.send_setpoint(goal)
-        time.sleep(0.5)
+        for _ in range(20):         # more than once: the node may not have matched us yet
+            pair.send_setpoint(goal)
+            time.sleep(0.05)
         t, q = pair.reset_and_record(1.5)
         error = np.abs(q - goal)
         assert np.allclose(error[0], pair.scale(START))
