@@ -8,9 +8,12 @@ reaches, at a fraction of its cost:
    and velocity bases), then Newton's method on all samples at once (and the redundant
    projection), by the kernels' *_many forms (C loops with the native backend, the lane
    code on (N,) arrays otherwise);
-3. a check of every sample against its predecessor by the serial path's own rules (one
-   continuation step away, a small Newton correction of the first-order prediction), and
-   a serial re-solve, in order, of every sample that fails it;
+3. a check of every sample against its predecessor by the serial path's own rules: one
+   continuation step away, and the serial step itself, Newton's method from the first-order
+   prediction (on all samples at once), closes the loops at the pose found in 2, within the
+   correction bound of the prediction (near a singular pose two assembly branches can both
+   lie that close to it: the step decides which one the serial path takes); then a serial
+   re-solve, in order, of every sample that fails it;
 4. eqs. (1)-(7) (pipeline.py) by the dynamics kernel, and the per-sample status (an
    Evaluation).
 """
@@ -21,18 +24,21 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 import numpy as np
 
 from . import closure
-from .continuation import correction_ok, fits_one_step, prediction
 from .errors import CogIdError
 from .inputs import check_values, checked_sample, out_of_range
 from .joint_motion import projected_pose
 from .kernels import RECORDS, ClosureRecord, unpack
 from .lanes import columns
+from .newton import REFINE_ITERATIONS
 from .sample_solve import (
     NEWTON_ITERATIONS,
     NEWTON_MAX_INCREMENT,
     PROJECTION_ITERATIONS,
+    PROJECTION_REACH,
     PROJECTION_TOLERANCE,
     SampleSolver,
+    increment_left,
+    relative_error,
 )
 from .value_types import BoolArray, FloatArray, IntArray
 
@@ -40,6 +46,11 @@ if TYPE_CHECKING:
     from .continuation import State
     from .joint_motion import BasisLayout
     from .mechanism import Mechanism
+
+#: two closed poses of one setpoint closer than this fraction of the joints' step limits
+#: (1e-7 rad) are one pose: on one branch they differ by the Newton increments left (1e-9 or
+#: less), while two assembly branches that close to each other meet at a singular pose
+SAME_POSE = 1e-6
 
 
 class Evaluation:
@@ -54,11 +65,17 @@ class Evaluation:
     active_positions (N, M): the active coordinates used (projected for redundant actuation)
     closure_residual (N,): max |closure equation| at the solution
     condition_number (N,): closure Jacobian condition number (see mechanism.max_condition_number)
+    relative_error (N,): the estimate of the torques' error relative to their scale, the
+        Newton increment left at the pose times the squared condition number
+        (sample_solve.relative_error); at most newton.ACCURACY_FACTOR * closure_tolerance
+        unless rounding keeps a pose near a singular one from closing further; inf where
+        not valid
     """
 
     def __init__(self, torques: FloatArray, valid: BoolArray, errors: list[CogIdError | None],
                  positions: FloatArray | Callable[[], FloatArray], active_positions: FloatArray,
-                 residual: FloatArray, condition: FloatArray) -> None:
+                 residual: FloatArray, condition: FloatArray,
+                 relative_error: FloatArray | None = None) -> None:
         self.torques = torques
         self.valid = valid
         self.errors = errors
@@ -66,6 +83,8 @@ class Evaluation:
         self.active_positions = active_positions
         self.closure_residual = residual
         self.condition_number = condition
+        self.relative_error = (np.where(valid, 0.0, math.inf) if relative_error is None
+                               else relative_error)
 
     @property
     def positions(self) -> FloatArray:
@@ -102,16 +121,19 @@ class Batch:
             if on_invalid == 'raise':
                 raise
             return self._one(state, np.zeros(q.shape), exc, getattr(exc, 'residual', math.inf),
-                             getattr(exc, 'condition_number', math.inf)), state
+                             getattr(exc, 'condition_number', math.inf), math.inf), state
+        magnitude = max([abs(new_state[0][j]) for j in self.serial.free] or [0.0])
         return self._one(new_state, np.array([record.torques]), None, record.worst,
-                         record.condition), new_state
+                         record.condition,
+                         relative_error(increment_left(record, self.serial.redundant),
+                                        record.condition, magnitude)), new_state
 
     def _one(self, state: 'State', torques: FloatArray, error: CogIdError | None, residual: float,
-             condition: float) -> Evaluation:
+             condition: float, relative: float) -> Evaluation:
         at = np.array([state[0]])
         return Evaluation(torques, np.array([error is None]), [error],
                           lambda: self.joints_at(at)[0], at[:, self.mechanism.active_index],
-                          np.array([residual]), np.array([condition]))
+                          np.array([residual]), np.array([condition]), np.array([relative]))
 
     def evaluate(self, state: 'State', q: FloatArray, qd: FloatArray, qdd: FloatArray,
                  on_invalid: str) -> tuple[Evaluation, 'State']:
@@ -131,6 +153,9 @@ class Batch:
             tau = record.torques.copy()
             residual = record.worst.copy()
             condition = record.condition.copy()
+            relative = relative_error(increment_left(record, m.is_redundant), condition,
+                                      np.abs(positions[:, m.free_joints]).max(axis=1,
+                                                                              initial=0.0))
         for k, exc in errors_in.items():
             errors[k] = exc
         ok &= finite & np.isfinite(tau).all(axis=1)
@@ -143,8 +168,10 @@ class Batch:
                 if on_invalid == 'raise':
                     raise errors[i]
         tau[~ok] = 0.0
+        relative[~ok] = math.inf
         return Evaluation(tau, ok, errors, lambda: self.joints_at(positions)[0],
-                          positions[:, m.active_index], residual, condition), new_state
+                          positions[:, m.active_index], residual, condition,
+                          relative), new_state
 
     def positions(self, state: 'State', qa: FloatArray, on_invalid: str,
                   invalid: BoolArray | None = None, qd: FloatArray | None = None,
@@ -165,12 +192,12 @@ class Batch:
         invalid = np.zeros(n, bool) if invalid is None else invalid
         knots = self.anchors(state, qa, invalid)                       # 1. serial anchors
         guess = self.interpolated_starts(state, qa, *knots)             # 2. starts, closed
-        positions, flat, converged, mismatch = self.close(guess, qa, qd, qdd)
+        positions, flat, converged, mismatch, closed = self.close(guess, qa, qd, qdd)
         record = self.record(flat)
         basis = _Bases(self.serial.layout, record.basis)
         ok = (converged & (record.condition <= m.max_condition_number) &
               (mismatch <= m.setpoint_tolerance) & ~invalid)
-        ok &= self.continues(state, qa, positions, record.basis)      # 3. the serial rules
+        ok &= self.continues(state, qa, positions, closed, record.basis, ok)  # 3. serial rules
         errors: list[Any] = [None] * n
         redone = self.resolve_serially(state, qa, positions, basis, ok, invalid, errors,
                                        on_invalid)
@@ -260,20 +287,26 @@ class Batch:
             flat[changed] = self.whole_many(positions[changed], *(x[changed] for x in setpoints))
         return new_state
 
-    def close(self, guess: FloatArray, qa: FloatArray, qd: FloatArray,
-              qdd: FloatArray) -> tuple[FloatArray, FloatArray, BoolArray, FloatArray]:
+    def close(self, guess: FloatArray, qa: FloatArray, qd: FloatArray, qdd: FloatArray
+              ) -> tuple[FloatArray, FloatArray, BoolArray, FloatArray, FloatArray]:
         """Newton on every sample at once from ``guess`` (N, n_joints), then for redundant
-        actuation the projection onto the setpoints ``qa``. Returns (positions, flat
-        dynamics outputs there, converged (N,), redundant mismatch (N,))."""
+        actuation the projection onto the setpoints ``qa``, then closed further where the
+        conditioning needs it (:meth:`refine`). Returns (positions, flat dynamics outputs
+        there, converged (N,), redundant mismatch (N,), the poses Newton closed before the
+        projection)."""
         m = self.mechanism
         q, converged = self.newton(guess)
         flat = self.whole_many(q, qa, qd, qdd)
         converged &= self.closed(self.record(flat))     # (after the last increment too)
         if not m.is_redundant:
-            return q, flat, converged, np.zeros(len(q))
+            self.refine(q, flat, qa, qd, qdd, converged)
+            return q, flat, converged, np.zeros(len(q)), q
+        closed = q.copy()
+        converged &= self.within_reach(q, self.record(flat), qa)
         for _ in range(PROJECTION_ITERATIONS):      # each sample until its increment is small
             record = self.record(flat)
-            todo = np.flatnonzero(np.abs(record.projection).max(axis=1) >= PROJECTION_TOLERANCE)
+            todo = np.flatnonzero(converged & (np.abs(record.projection).max(axis=1) >=
+                                               PROJECTION_TOLERANCE))
             if not todo.size:
                 break
             part = self.record(flat[todo])
@@ -284,7 +317,56 @@ class Batch:
             q[todo], converged[todo] = self.newton(np.column_stack(moved))
             flat[todo] = self.whole_many(q[todo], qa[todo], qd[todo], qdd[todo])
             converged[todo] &= self.closed(self.record(flat[todo]))
-        return q, flat, converged, np.abs(q[:, m.active_index] - qa).max(axis=1)
+        self.refine(q, flat, qa, qd, qdd, converged)
+        return q, flat, converged, np.abs(q[:, m.active_index] - qa).max(axis=1), closed
+
+    def within_reach(self, q: FloatArray, record: Any, qa: FloatArray) -> BoolArray:
+        """(N,) bool: each redundant setpoint of ``qa`` is within the reach of the projection
+        from its closed pose ``q`` (sample_solve.reach; the others are refused serially)."""
+        m = self.mechanism
+        error = np.abs(q[:, m.active_index] - qa).max(axis=1)
+        far = np.flatnonzero(~(error <= PROJECTION_REACH * m.setpoint_tolerance))
+        out = np.ones(len(q), bool)
+        if far.size:
+            rows = self.serial.layout.array(record.basis[far])[:, m.active_index, :]
+            limit = PROJECTION_REACH * (1.0 + np.abs(rows).sum(axis=2).max(axis=1)) * \
+                m.setpoint_tolerance
+            out[far] = error[far] <= limit
+        return out
+
+    def refine(self, q: FloatArray, flat: FloatArray, qa: FloatArray, qd: FloatArray,
+               qdd: FloatArray, converged: BoolArray) -> None:
+        """The closed poses ``q`` (their flat outputs ``flat``, both updated in place) closed
+        further where the conditioning needs it, as SampleSolver.refined does one: a Newton
+        increment at a time while the estimated relative error exceeds newton.ACCURACY_FACTOR
+        times the tolerance and the increment shrinks. (Newton's last increment has closed them to
+        rounding almost everywhere: this is for the poses near a singular one.)"""
+        if not self.serial.refine:
+            return
+        m = self.mechanism
+        redundant = m.is_redundant
+        target = self.serial.accuracy
+        record = self.record(flat)
+        with np.errstate(all='ignore'):
+            todo = np.flatnonzero(converged & (relative_error(increment_left(record, redundant),
+                                                              record.condition) > target))
+            for _ in range(REFINE_ITERATIONS):
+                if not todo.size:
+                    break
+                part = self.record(flat[todo])
+                moved = q[todo]
+                moved[:, m.free_joints] -= part.increment
+                if redundant:
+                    basis = self.serial.layout.array(part.basis)
+                    moved = np.column_stack(projected_pose(
+                        m, columns(moved), [columns(row) for row in basis.swapaxes(0, 1)],
+                        columns(part.projection)))
+                better = self.whole_many(moved, qa[todo], qd[todo], qdd[todo])
+                new = self.record(better)
+                size = increment_left(new, redundant)
+                took = (size < increment_left(part, redundant)) & self.closed(new)
+                q[todo[took]], flat[todo[took]] = moved[took], better[took]
+                todo = todo[took][relative_error(size[took], new.condition[took]) > target]
 
     def newton(self, q: FloatArray) -> tuple[FloatArray, BoolArray]:
         """Newton's method on the loop equations of all samples at once, by the closure
@@ -341,12 +423,15 @@ class Batch:
         return unpack(flat, self.layout, self.record_type)
 
     def continues(self, start_state: 'State', qa: FloatArray, positions: FloatArray,
-                  free_rows: FloatArray) -> BoolArray:
-        """(N,) bool: sample i is one continuation step from sample i-1 (the warm start for
-        i = 0) and within the Newton correction bound of its first-order prediction, i.e.
-        where the serial path would have taken it in one step from there. ``free_rows``:
-        the velocity basis rows of the free joints (N, n_free, dof); the primary actuators'
-        rows are unit rows, so they move by dz."""
+                  closed: FloatArray, free_rows: FloatArray, candidates: BoolArray) -> BoolArray:
+        """(N,) bool: each of the ``candidates`` is where the serial path takes it in one
+        step from sample i-1 (``positions``; the warm start for i = 0): one continuation step
+        away, and Newton's method from the first-order prediction, the serial step, closes
+        the loops at ``closed`` (the batch's pose before any redundant projection), within
+        the Newton correction bound of the prediction. (The bound alone does not say which
+        pose the step reaches: near a singular pose two branches can both be that close.)
+        ``free_rows``: the velocity basis rows of the free joints (N, n_free, dof); the
+        primary actuators' rows are unit rows, so they move by dz."""
         m = self.mechanism
         free = m.free_joints
         limits, bounds = np.array(self.serial.limits), np.array(self.serial.bounds)
@@ -359,15 +444,43 @@ class Batch:
         predicted[:, free] += moved
         predicted[:, m.primary_joints] = qa[:, m.primary]
         near = np.abs(dz) <= limits[m.primary_joints]              # as fits_one_step
-        return (near.all(axis=1) & (np.abs(moved) <= limits[free]).all(axis=1) &
-                (np.abs(positions - predicted) <= bounds).all(axis=1))
+        one = (candidates & near.all(axis=1) & (np.abs(moved) <= limits[free]).all(axis=1) &
+               (np.abs(closed - predicted) <= bounds).all(axis=1))
+        if one.all():                           # the serial step, on every sample at once
+            return self.reaches(predicted, closed, limits)
+        rows = np.flatnonzero(one)
+        if rows.size:
+            one[rows] = self.reaches(predicted[rows], closed[rows], limits)
+        return one
+
+    def reaches(self, q: FloatArray, pose: FloatArray, limits: FloatArray) -> BoolArray:
+        """(N,) bool: Newton's method from ``q`` (N, n_joints; moved in place) closes the
+        loops at ``pose``. Its first increment, on every sample, ends within SAME_POSE of the
+        pose almost always (from a first-order prediction it is quadratically close): that
+        pose is where the next ones converge; Newton goes on only from the others."""
+        kernels, free = self.kernels, self.mechanism.free_joints
+        record = unpack(kernels.closure_many(q), kernels.layouts['closure'], ClosureRecord)
+        size = record.largest_step
+        with np.errstate(divide='ignore', invalid='ignore'):
+            factor = np.where(size > NEWTON_MAX_INCREMENT, NEWTON_MAX_INCREMENT / size, 1.0)
+        factor = np.where(np.isfinite(factor), factor, 0.0)
+        q[:, free] -= record.increment * factor[:, None]
+        same: BoolArray = np.all(np.abs(q - pose) <= SAME_POSE * limits, axis=1)
+        rest = np.flatnonzero(~same)
+        if rest.size:
+            reached, converged = self.newton(q[rest])
+            same[rest] = converged & (np.abs(reached - pose[rest]) <=
+                                      SAME_POSE * limits).all(axis=1)
+        return same
 
     def resolve_serially(self, start_state: 'State', qa: FloatArray, positions: FloatArray,
                          basis: '_Bases', ok: BoolArray, invalid: BoolArray, errors: list[Any],
                          on_invalid: str) -> BoolArray:
         """Re-solve, in order, every sample not ``ok`` by serial continuation from the last
-        good sample before it; a sample after one that changed is checked again. Updates
-        the arrays in place; returns the (N,) mask of the samples re-solved."""
+        good sample before it; a sample after one that changed is solved serially again
+        too, and stands as the batch found it (closed to rounding) where the serial path
+        finds the same pose. Updates the arrays in place; returns the (N,) mask of the
+        samples re-solved."""
         pending = [int(i) for i in np.flatnonzero(~ok)]
         heapq.heapify(pending)
         last_good, last_done = -1, -1
@@ -385,9 +498,6 @@ class Batch:
                 if i + 1 < len(ok):
                     heapq.heappush(pending, i + 1)
                 continue
-            if ok[i] and self.one_step(previous, qa[i], positions[i]):
-                last_good = i                  # still continues from its new predecessor
-                continue
             before = positions[i].copy()
             try:
                 solved, solved_basis = self.serial.solve(previous, qa[i].tolist(), sample=i)[1]
@@ -396,6 +506,9 @@ class Batch:
                 if on_invalid == 'raise':
                     raise
             else:
+                if ok[i] and self.same_pose(solved, before):
+                    last_good = i              # still continues from its new predecessor
+                    continue
                 positions[i], basis[i] = solved, solved_basis
                 ok[i], redone[i], last_good = True, True, i
                 if np.max(np.abs(positions[i] - before)) <= 1e-9:
@@ -404,13 +517,11 @@ class Batch:
                 heapq.heappush(pending, i + 1)
         return redone
 
-    def one_step(self, state: 'State', target: Any, solution: FloatArray) -> bool:
-        """The serial rule of :meth:`continues` for one sample (lists and arrays of floats)."""
-        m = self.mechanism
-        target = target.tolist()
-        predicted, moved = prediction(m, state, target)
-        return (fits_one_step(m, self.serial.limits, state, target, moved) and
-                correction_ok(solution.tolist(), predicted, self.serial.bounds))
+    def same_pose(self, solved: Sequence[float], pose: FloatArray) -> bool:
+        """True when the serial path's pose ``solved`` of a sample is the batch's ``pose``
+        (within SAME_POSE of the step limits: the serial one is closed to the tolerance)."""
+        return bool((np.abs(np.asarray(solved) - pose) <=
+                     SAME_POSE * np.asarray(self.serial.limits)).all())
 
 
 def _wrapped(dz: FloatArray, revolute: BoolArray) -> FloatArray:

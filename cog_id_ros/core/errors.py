@@ -13,7 +13,8 @@ REASONS = {
     'closure': 'the loops cannot be closed at this pose',
     'singular': 'the pose is singular (closure Jacobian condition number too large; for '
                 'forward dynamics also an inertia that cannot be solved)',
-    'inconsistent': 'redundant actuation: the active coordinates disagree with the loop closure',
+    'inconsistent': 'redundant actuation: the active coordinates disagree with the loop closure '
+                    'on the assembly branch the solver is on',
     'unreachable': 'the pose cannot be reached from the previous one by continuation',
 }
 
@@ -59,7 +60,9 @@ class ClosureError(CogIdError):
     ``reason`` 'closure'; 'unreachable' when the pose may exist but cannot be reached
     from the previous one by continuation (too far, or across a dead centre);
     'inconsistent' for a redundant setpoint that disagrees with the closure by more than
-    ``mechanism.setpoint_tolerance`` (``residual`` is then that disagreement).
+    ``mechanism.setpoint_tolerance`` (``residual`` is then that disagreement), on the
+    assembly branch the solver is on (the message says when the loops close at it in
+    another assembly mode).
     """
 
     def __init__(self, message: str, residual: float, sample: int | None = None,

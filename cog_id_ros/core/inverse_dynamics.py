@@ -60,6 +60,7 @@ class InverseDynamics:
         kernels = kernels_for(solved, backend)
         self._backend = kernels.name
         self._serial = SampleSolver(solved, kernels, self.continuation_step)
+        self._serial.refine = True      # closed past the tolerance where conditioning needs it
         self._batch = Batch(solved, self._serial, mechanism.joints_at)
         self._poses = PoseSolver(mechanism, self._serial, self._batch)
         self._kernels = kernels
@@ -108,6 +109,7 @@ class InverseDynamics:
         if self._forward is None:       # (its kernels are loaded, or built, now)
             self._forward = ForwardSolver(self._solved, self._kernels, self.continuation_step,
                                           self.mechanism.joints_at)
+            self._forward.serial.refine = True      # (as the torques' solver)
         if single:
             record, self._state = self._forward.one(self._state, positions, rates_in, efforts)
             return np.array(record.accelerations)

@@ -10,6 +10,10 @@ The per-sample solve, written once for every backend (kernels.py does the arithm
    not singular, a Newton correction small enough to be on the same branch.
 3. **Redundant actuation**, at the last step only: Gauss-Newton towards the closed pose
    nearest the whole setpoint (W^-1 metric), and the check that it is near enough.
+4. **Closed further where the conditioning needs it** (InverseDynamics' solvers, ``refine``),
+   at the last step only: one more Newton increment while the increment left times the
+   squared condition number exceeds newton.ACCURACY_FACTOR times the tolerance (near a
+   singular pose; a well-conditioned one closed to the tolerance is left as it is).
 
 A pose that cannot be served raises the error that says why (``.reason``: closure,
 singular, inconsistent, unreachable); the warm start is the caller's and is never changed
@@ -18,10 +22,13 @@ here.
 import math
 from typing import TYPE_CHECKING, Any, Sequence
 
-from .closure import loops_closed
+import numpy as np
+
+from .closure import assemble, loops_closed
 from .continuation import (
     MAX_STEPS,
     MIN_STEP,
+    TWO_PI,
     State,
     actuator_ratio,
     correction_bounds,
@@ -36,7 +43,14 @@ from .continuation import (
 from .errors import ClosureError, SingularConfigurationError
 from .inputs import out_of_range
 from .joint_motion import BasisLayout, projected_pose
-from .newton import LIKELY_CLOSED, NEWTON_ITERATIONS, NEWTON_MAX_INCREMENT, STAGNATION
+from .newton import (
+    ACCURACY_FACTOR,
+    LIKELY_CLOSED,
+    NEWTON_ITERATIONS,
+    NEWTON_MAX_INCREMENT,
+    REFINE_ITERATIONS,
+    STAGNATION,
+)
 from .value_types import LaneMatrix
 
 if TYPE_CHECKING:
@@ -47,6 +61,15 @@ if TYPE_CHECKING:
 PROJECTION_ITERATIONS = 6
 PROJECTION_TOLERANCE = 1e-14
 
+#: the relative rounding of a coordinate (a double's machine epsilon)
+ROUNDING = 2.220446049250313e-16
+
+#: a redundant setpoint within mechanism.setpoint_tolerance of a closed pose of a branch
+#: (every actuator) is within (1 + |V_a|) times that of the branch's pose at its primary
+#: actuators (V_a the active rows of the velocity basis, to first order); this many times
+#: that, it is refused at once (:func:`reach`)
+PROJECTION_REACH = 2.0
+
 
 class SampleSolver:
     """The per-sample solve of one mechanism with one set of kernels.
@@ -55,7 +78,18 @@ class SampleSolver:
     joints of rows over the primary actuators), as solve() returns it. ``whole``: the kernel
     that evaluates a closed pose, 'dynamics' (torques from qd, qdd) or 'forward'
     (accelerations from qd and the efforts, in place of qdd: forward_dynamics.py).
+    ``refine``: the pose of a setpoint is closed past the tolerance where its conditioning
+    needs it (:meth:`refined`); InverseDynamics sets it, a Simulation's stages do not.
     """
+
+    #: close the final pose past the tolerance where its conditioning needs it
+    refine = False
+
+    @property
+    def accuracy(self) -> float:
+        """The largest relative_error a pose is left at (where rounding allows):
+        newton.ACCURACY_FACTOR times the closure tolerance."""
+        return ACCURACY_FACTOR * self.tolerance
 
     def __init__(self, mechanism: 'Mechanism', kernels: 'ReferenceKernels',
                  continuation_step: float, whole: str = 'dynamics') -> None:
@@ -104,7 +138,7 @@ class SampleSolver:
                     predicted = predict(state[0], state[1], goal).predicted
             try:
                 record, new_state, closed = self.step(predicted, goal, final and project, qd,
-                                                      qdd, sample)
+                                                      qdd, sample, last=final)
             except ClosureError as exc:
                 if final:
                     raise
@@ -146,11 +180,12 @@ class SampleSolver:
         return record, state
 
     def step(self, predicted: Sequence[float], goal: Sequence[float], final: bool,
-             qd: Sequence[float], qdd: Sequence[float],
-             sample: int | None) -> tuple['PoseRecord', State, Sequence[float]]:
+             qd: Sequence[float], qdd: Sequence[float], sample: int | None,
+             last: bool = False) -> tuple['PoseRecord', State, Sequence[float]]:
         """One continuation step: close the loops from ``predicted``, check, and when
         ``final`` (the final step, projected) for a redundant mechanism project onto
-        ``goal``. Returns (PoseRecord, new state,
+        ``goal``; when ``last`` (the final step) and :attr:`refine`, close further where the
+        conditioning needs it. Returns (PoseRecord, new state,
         the pose Newton closed before any projection)."""
         m = self.mechanism
         q, record, iterations, ok = self.close(predicted, goal, qd, qdd)
@@ -159,6 +194,9 @@ class SampleSolver:
         closed = q
         if final and self.redundant:
             q, record = self.project(q, record, goal, qd, qdd, sample)
+        if last and self.refine and (self.redundant or record.largest_step *
+                                     record.condition * record.condition > self.accuracy):
+            q, record = self.refined(q, record, goal, qd, qdd)
         if not record.condition <= m.max_condition_number:
             raise singular(m, record.condition, sample)
         return record, (q, self.layout.rows(record.basis)), closed
@@ -198,16 +236,49 @@ class SampleSolver:
             record = evaluate(q, goal, qd, qdd)
         return q, record, iteration, False
 
+    def refined(self, q: Sequence[float], record: 'PoseRecord', goal: Sequence[float],
+                qd: Sequence[float], qdd: Sequence[float]
+                ) -> tuple[Sequence[float], 'PoseRecord']:
+        """The closed pose ``q`` (its whole record ``record``) closed further while its
+        :func:`relative_error` exceeds newton.ACCURACY_FACTOR times the tolerance: one Newton
+        increment at a time (the record holds it; with redundant actuation the projection's
+        increment is taken with it), each evaluated as a whole record, at most
+        REFINE_ITERATIONS, and only while the increment shrinks (else rounding: the pose
+        cannot be closed further, and stays where it is)."""
+        tol, free = self.tolerance, self.free
+        size = increment_left(record, self.redundant)
+        for _ in range(REFINE_ITERATIONS):
+            if not relative_error(size, record.condition) > self.accuracy or \
+                    not size < math.inf:
+                break
+            moved = list(q)
+            increment = record.increment
+            for k, j in enumerate(free):
+                moved[j] = q[j] - increment[k]
+            if self.redundant:
+                moved = projected_pose(self.mechanism, moved, self.basis(record),
+                                       record.projection)
+            better = self.whole(moved, goal, qd, qdd)
+            smaller = increment_left(better, self.redundant)
+            if not (smaller < size and loops_closed(better.worst, better.least_cosine, tol)):
+                break
+            q, record, size = moved, better, smaller
+        return q, record
+
     def project(self, q: Sequence[float], record: 'PoseRecord', target: Sequence[float],
                 qd: Sequence[float], qdd: Sequence[float],
                 sample: int | None) -> tuple[Sequence[float], 'PoseRecord']:
         """Redundant actuation: Gauss-Newton over closed poses towards ``target``; the
-        setpoint must then be within mechanism.setpoint_tolerance of the pose."""
+        setpoint must then be within mechanism.setpoint_tolerance of the pose. A setpoint
+        farther from the closed pose ``q`` than any on its branch can be (:func:`reach`) is
+        refused at once: the projection would leave the branch (to another assembly mode)."""
         m = self.mechanism
-        for _ in range(PROJECTION_ITERATIONS):
+        for iteration in range(PROJECTION_ITERATIONS):
             dz = record.projection
             if max(map(abs, dz)) < PROJECTION_TOLERANCE:
                 break
+            if not iteration:
+                self.within_reach(q, record, target, sample)
             q, record, iterations, ok = self.close(
                 projected_pose(m, q, self.basis(record), dz), target, qd, qdd,
                 likely_closed=True)
@@ -215,15 +286,59 @@ class SampleSolver:
                 raise not_closed(record, self.tolerance, iterations, sample)
         mismatch = max(abs(q[j] - t) for j, t in zip(m.active_index, target))
         if mismatch > m.setpoint_tolerance:
-            raise ClosureError(
-                f'{_where(sample)}the redundant setpoint disagrees with the loop closure by '
-                f'{mismatch:.6g} (rad or m), more than mechanism.setpoint_tolerance '
-                f'{m.setpoint_tolerance:.6g}', mismatch, sample, reason='inconsistent')
+            raise inconsistent(m, q, target, mismatch, sample)
         return q, record
+
+    def within_reach(self, q: Sequence[float], record: 'PoseRecord', target: Sequence[float],
+                     sample: int | None) -> None:
+        """Raises 'inconsistent' where the redundant setpoint ``target`` is farther from the
+        closed pose ``q`` of its primary actuators than any setpoint the projection can
+        honour on this branch (:func:`reach`): the projection would leave the branch, to
+        another assembly mode."""
+        m = self.mechanism
+        error = max(abs(q[j] - t) for j, t in zip(m.active_index, target))
+        if error > PROJECTION_REACH * m.setpoint_tolerance:
+            basis = self.basis(record)
+            if error > reach(m, basis):
+                dz = record.projection          # (the disagreement left, to first order)
+                left = max(abs(q[j] - t - sum(b * d for b, d in zip(basis[j], dz)))
+                           for j, t in zip(m.active_index, target))
+                raise inconsistent(m, q, target, left, sample)
 
     def basis(self, record: 'PoseRecord') -> LaneMatrix:
         """The velocity basis V (list over joints) from a record's rows of the free joints."""
         return self.layout.rows(record.basis)
+
+
+def reach(mechanism: 'Mechanism', basis: LaneMatrix) -> float:
+    """How far (rad or m) a redundant setpoint that the projection can honour may be from the
+    closed pose of its primary actuators, with the velocity basis ``basis`` there:
+    PROJECTION_REACH (1 + max row sum of |V_a|) mechanism.setpoint_tolerance. Farther, no
+    pose of the branch is within the tolerance of it."""
+    rows = max(sum(map(abs, basis[j])) for j in mechanism.active_index)
+    return PROJECTION_REACH * (1.0 + rows) * mechanism.setpoint_tolerance
+
+
+def increment_left(record: Any, redundant: bool) -> Any:
+    """The Newton increment left at a closed pose (rad or m): the closure's largest, and
+    with ``redundant`` actuation the projection's if larger. A record of floats, or of (N,)
+    arrays for an (N,) array."""
+    if not redundant:
+        return record.largest_step
+    if isinstance(record.largest_step, float):
+        return max(record.largest_step, max(map(abs, record.projection)))
+    return np.maximum(record.largest_step, np.abs(record.projection).max(axis=-1))
+
+
+def relative_error(increment: Any, condition: Any, magnitude: Any = None) -> Any:
+    """The estimate of the torques' error at a closed pose relative to their scale: the
+    Newton increment left there (:func:`increment_left`, rad or m) times the squared
+    condition number (newton.ACCURACY_FACTOR). With ``magnitude``, the largest |coordinate|
+    of the free joints, the coordinates' rounding, ROUNDING (1 + magnitude), is added to
+    the increment (a pose closed to rounding is not exact). Floats, or (N,) arrays."""
+    if magnitude is not None:
+        increment = increment + ROUNDING * (1.0 + magnitude)
+    return increment * condition * condition
 
 
 def _where(sample: int | None) -> str:
@@ -248,6 +363,80 @@ def singular(mechanism: 'Mechanism', condition: float,
         f'{_where(sample)}singular configuration: closure Jacobian condition number '
         f'{condition:.3g} exceeds mechanism.max_condition_number '
         f'{mechanism.max_condition_number:.3g}', condition, sample)
+
+
+def inconsistent(mechanism: 'Mechanism', q: Sequence[float], target: Sequence[float],
+                 mismatch: float, sample: int | None) -> ClosureError:
+    """ClosureError(reason='inconsistent') for a redundant setpoint ``target`` that the pose
+    ``q`` of the solver's assembly branch misses by ``mismatch``
+    (:class:`InconsistentSetpointError`)."""
+    return InconsistentSetpointError(mechanism, q, target, mismatch, sample)
+
+
+class InconsistentSetpointError(ClosureError):
+    """ClosureError(reason='inconsistent') for a redundant setpoint that the pose ``q`` of
+    the solver's assembly branch misses by ``mismatch``. Where the loops close with every
+    active joint at the setpoint in another assembly mode (:func:`other_mode`), its message
+    says so and what to do: worked out when the message is first read (a few least-squares
+    solves: a batch of refused samples does not pay for messages no one reads)."""
+
+    def __init__(self, mechanism: 'Mechanism', q: Sequence[float], target: Sequence[float],
+                 mismatch: float, sample: int | None) -> None:
+        super().__init__(
+            f'{_where(sample)}the redundant setpoint disagrees with the loop closure by '
+            f'{mismatch:.6g} (rad or m), more than mechanism.setpoint_tolerance '
+            f'{mechanism.setpoint_tolerance:.6g}', mismatch, sample, reason='inconsistent')
+        self._pose: Any = (mechanism, list(q), list(target))
+        self._text: str | None = None
+
+    def __str__(self) -> str:
+        if self._text is None:
+            text = super().__str__()
+            other = other_mode(*self._pose)
+            if other is not None:
+                joint, here, there = other
+                text += (f', on the assembly branch the solver follows; the loops do close at '
+                         f'this setpoint, in another assembly mode ({joint} at {there:.6g} '
+                         f'there, {here:.6g} on this branch). The solver keeps the assembly '
+                         f'mode it is on (continuation from the last pose): to serve setpoints '
+                         f'of the other mode, reset() if initial_positions are in it, or start '
+                         f'nearer, from setpoints of a motion that stays in that mode')
+            self._text = text
+        return self._text
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as the ClosureError it says (its message worked out)."""
+        return ClosureError, (str(self), self.residual, self.sample, self.reason)
+
+
+def other_mode(mechanism: 'Mechanism', q: Sequence[float], target: Sequence[float]
+               ) -> tuple[str, float, float] | None:
+    """Where a redundant setpoint ``target`` is consistent with another assembly mode than
+    that of the closed pose ``q``: the loops closed from ``q`` with every active joint moved
+    to ``target`` and held (closure.assemble, Gauss-Newton), and if they close, (the joint
+    that differs most from ``q``, its coordinate in ``q``, there); None otherwise. (The
+    error path only: a few least-squares solves.)"""
+    m = mechanism
+    start = list(q)
+    for j, t in zip(m.active_index, target):
+        start[j] = t
+    held = set(m.active_index) | set(getattr(m, 'locked_index', ()))
+    try:
+        closed, _, ok = assemble(m.model, start, m.closure_tolerance, held, max_iter=50)
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+        return None
+    kinds = m.model.coordinate_kinds
+    moved = []              # (how far, joint, where): a revolute joint's nearest turn
+    for j in range(len(m.joints)):
+        if j not in held:
+            d = closed[j] - q[j]
+            if kinds[j].wraps:
+                d -= TWO_PI * round(d / TWO_PI)
+            moved.append((abs(d), j, q[j] + d))
+    if not ok or not moved:
+        return None
+    _, j, there = max(moved)
+    return m.joints[j], q[j], there
 
 
 def unreachable(mechanism: 'Mechanism', start: State, target: Sequence[float], sample: int | None,
