@@ -316,6 +316,12 @@ class Report:
             status.level = DiagnosticStatus.ERROR
             status.message = ('last measured state rejected '
                               f'({node.counts.last_measurement_rejection})')
+        publishers, most = node.counts.matched['measured_joint_states'], \
+            node.config.max_measured_publishers
+        if node.config.feedback and most and publishers > most:   # whatever was rejected last
+            status.level = DiagnosticStatus.ERROR
+            status.message = (f'{publishers} publishers feed measured_joint_states, more than '
+                              f'max_measured_publishers ({most}): not commanded from')
         values = [('mechanism', node.mechanism.name),
                   ('active_joints', ', '.join(node.config.active_joints)),
                   ('backend', node.solver.backend),

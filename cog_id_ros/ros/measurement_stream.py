@@ -17,6 +17,7 @@ command is published; :meth:`MeasurementStream.stopped_for` says when no measure
 accepted for the timeout (``timeout_behavior`` then applies, once, and the next
 measurement starts a new stream).
 """
+import math
 import time
 from typing import Any, Callable
 
@@ -78,9 +79,13 @@ class MeasurementStream:
             if abs(rate) > limit:
                 raise Rejected('velocity', f'measured velocity of {joint} is {rate:.6g}, beyond '
                                f'max_measured_velocity ({limit:g}): not commanded from')
-        if self.stopped and self.last_pose is not None:
+        # a new stream after the timeout, or after a gap as long that the timer has not
+        # judged yet (this node was stopped or starved: its timeout waits for what arrived)
+        restart = self.stopped or (self.last_time is not None
+                                   and time.monotonic() - self.last_time >= self.timeout)
+        if restart and self.last_pose is not None:
             self._confirm_restart(q)
-        previous = self.candidate if self.stopped else self.last_pose
+        previous = self.candidate if restart else self.last_pose
         if previous is not None:
             q = [nearest_turn(x, ref) if wrap else x
                  for x, ref, wrap in zip(q, previous, self.unwrap)]
@@ -118,12 +123,14 @@ class MeasurementStream:
         """Seconds since the last accepted measurement was received (None: none yet)."""
         return None if self.last_time is None else time.monotonic() - self.last_time
 
-    def stopped_for(self, timeout: float) -> bool:
+    def stopped_for(self, timeout: float, since: float = -math.inf) -> bool:
         """True, once, when no measurement was accepted for ``timeout`` s: the stream
-        counts as stopped, and the next measurement starts a new one (no jump check)."""
+        counts as stopped, and the next measurement starts a new one (no jump check). ``since``
+        (monotonic): the silence counts from then at the earliest (the node itself did not
+        run before: stopped or starved)."""
         if self.stopped or self.last_time is None:
             return False
-        if time.monotonic() - self.last_time < timeout:
+        if time.monotonic() - max(self.last_time, since) < timeout:
             return False
         self.stopped = True
         return True

@@ -421,7 +421,7 @@ class CogIdNode(ReadOnlyNode):
 
     def _check_timeout(self) -> None:
         config = self.config
-        if not self.setpoints.stopped_for(config.setpoint_timeout):
+        if not self.setpoints.stopped_for(config.setpoint_timeout, self._resumed('setpoints')):
             return
         if self.mode.measured:
             cast(FeedbackMode, self.mode).setpoints_stopped()
@@ -449,7 +449,7 @@ class CogIdNode(ReadOnlyNode):
             self.setpoint_loop.serve_queued()
             cast(Any, self.measurement_loop).serve_queued()
             self._no_measured_state(stream.last_time)
-            if not stream.stopped_for(self.config.measurement_timeout):
+            if not stream.stopped_for(self.config.measurement_timeout, self._resumed('measured')):
                 return
             self.counts.totals['timeouts'] += 1
             what = self.apply_timeout_behavior(stream.last_pose)
@@ -493,6 +493,12 @@ class CogIdNode(ReadOnlyNode):
             resumed = now               # it was stopped: wait a period for the inputs
         self._timer_runs[timer] = (now, resumed)
         return now - resumed < period
+
+    def _resumed(self, timer: str) -> float:
+        """When this process last ran again after a stop or starvation seen by the timer
+        ``timer`` (monotonic; -inf: never): a stream's silence counts from then at the
+        earliest, as the node could not hear it while it did not run."""
+        return self._timer_runs.get(timer, (None, -math.inf))[1]
 
     def apply_timeout_behavior(self, pose: Sequence[float] | None) -> str | None:
         """Publish timeout_behavior's command once (hold: the gravity-holding efforts of

@@ -106,12 +106,14 @@ class SetpointStream:
         self.stopped = False
         self.counts.served(unstamped)
 
-    def stopped_for(self, timeout: float) -> bool:
+    def stopped_for(self, timeout: float, since: float = -math.inf) -> bool:
         """True, once, when no setpoint was accepted for ``timeout`` s: the stream counts as
-        stopped and the estimator restarts (the next setpoint may carry any stamp)."""
+        stopped and the estimator restarts (the next setpoint may carry any stamp). ``since``
+        (monotonic): the silence counts from then at the earliest (the node itself did not
+        run before: stopped or starved)."""
         if self.stopped or self.last_time is None:
             return False
-        if time.monotonic() - self.last_time < timeout:
+        if time.monotonic() - max(self.last_time, since) < timeout:
             return False
         self.stopped = True
         self.filter.reset()

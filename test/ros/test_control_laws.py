@@ -275,3 +275,24 @@ def test_measured_states_checked():
         stream.take(Msg(names, [1.3], [0.0]))               # 0.3 rad in one step
     assert bad.value.reason == 'jump'
     assert stream.take(Msg(names, [1.1 - 2 * math.pi], [0.0]))[0] == pytest.approx([1.1])
+
+
+def test_a_gap_longer_than_the_timeout_restarts_the_stream_before_the_timer_judges_it():
+    """Reliability item 2 (issue 32): the node stopped longer than measurement_timeout, its
+    timer not yet run: the fresh measured states are not jumps from the pose before the
+    gap; the first is a restart candidate, the next that agrees with it is commanded from.
+    The timer's stopped_for counts the silence from when the node ran again (``since``)."""
+    import time
+    mech = Mechanism.from_params_file('config/paper_four_bar_a.yaml')
+    stream = MeasurementStream(config_for(mech, measurement_timeout=0.1), needs_velocities=True)
+    names = ['joint3']
+    stream.take(Msg(names, [1.0], [0.0]))
+    stream.accept()
+    time.sleep(0.12)                                       # the gap (a stopped node)
+    with pytest.raises(Rejected) as bad:
+        stream.take(Msg(names, [1.3], [0.0]))               # 0.3 rad on: not a jump now
+    assert bad.value.reason == 'restart'
+    assert stream.take(Msg(names, [1.31], [0.0]))[0] == [1.31]
+    assert not stream.stopped_for(0.1, since=time.monotonic())   # woke just now: not yet
+    assert stream.stopped_for(0.1)                                # counted from the last one
+    assert not stream.stopped_for(0.1)                            # once
