@@ -27,7 +27,9 @@ from .errors import (
 from .inverse_dynamics import Evaluation, InverseDynamics
 from .mechanism import AssemblyWarning, Mechanism
 from .simulation import Simulation
+from .transmission.transmission import Transmission
 
 __all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',
            'InverseDynamics', 'Mechanism',
-           'MechanismConfigError', 'SetpointError', 'Simulation', 'SingularConfigurationError']
+           'MechanismConfigError', 'SetpointError', 'Simulation', 'SingularConfigurationError',
+           'Transmission']

@@ -37,12 +37,13 @@ from .errors import MechanismConfigError
 from .kinematics import BASE, JointSpec, KinematicModel
 from .parameters import ParameterReader, split_owner
 from .spherical_chains import SphericalChain
+from .transmission.joint_space import check_joint_space, read_joint_space
 from .value_types import FloatArray
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
                   'max_condition_number', 'closure_tolerance', 'locked_joints', 'idle_spins',
-                  'found_at_assembly', 'assembly')
+                  'found_at_assembly', 'assembly', 'joint_space')
 LINK_KEYS = ('mass', 'com', 'inertia')
 JOINT_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy',
               'axis', 'axis2') + couplings.KEYS + ('lower', 'upper', 'effort')
@@ -113,6 +114,8 @@ class Mechanism:
         self._read_positions(reader)
         couplings.read_couplings(self, reader, MAX_COORDINATE)
         idle_spins.read_locks(self, reader)
+        #: mechanism.joint_space: the joints a controller commands ([]: none; transmission/)
+        self.joint_space = read_joint_space(self, reader)
         self._reject_unknown(reader)
         self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs, [
             couplings.constraint(f, self.joints.index(f), self.joints.index(leader), m, o)
@@ -129,6 +132,7 @@ class Mechanism:
             matrix = self._analyse()
             self._actuated(degrees_of_freedom.primary_actuators(self, matrix, self.dof))
             degrees_of_freedom.report_dependent(self, matrix)
+            check_joint_space(self, idle_spins.with_locks(self, matrix))
         except (np.linalg.LinAlgError, ArithmeticError, FloatingPointError) as exc:
             raise MechanismConfigError(
                 'mechanism.initial_positions',
@@ -373,7 +377,7 @@ class Mechanism:
                                                     self.assembled_positions)
         # the spins are locked already, and every position is where the assembly put it
         for name in ('mechanism.idle_spins', 'mechanism.found_at_assembly',
-                     'mechanism.assembly'):
+                     'mechanism.assembly', 'mechanism.joint_space'):
             params.pop(name, None)
         if self.locked_joints:
             params['mechanism.locked_joints'] = list(self.locked_joints)

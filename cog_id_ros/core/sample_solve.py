@@ -84,12 +84,14 @@ class SampleSolver:
 
     #: close the final pose past the tolerance where its conditioning needs it
     refine = False
+    #: the largest relative_error a refined pose is left at, over the closure tolerance
+    accuracy_factor = ACCURACY_FACTOR
 
     @property
     def accuracy(self) -> float:
         """The largest relative_error a pose is left at (where rounding allows):
-        newton.ACCURACY_FACTOR times the closure tolerance."""
-        return ACCURACY_FACTOR * self.tolerance
+        accuracy_factor (newton.ACCURACY_FACTOR) times the closure tolerance."""
+        return self.accuracy_factor * self.tolerance
 
     def __init__(self, mechanism: 'Mechanism', kernels: 'ReferenceKernels',
                  continuation_step: float, whole: str = 'dynamics') -> None:

@@ -1,0 +1,196 @@
+"""Transmission: the exact map between actuator space and joint space, both ways.
+
+A mechanism that names ``mechanism.joint_space`` (joint_space.py) has two sets of
+independent coordinates: the motors theta (active_joints, M) and the joints a controller
+commands q (joint_space, D = its degrees of freedom). Both close the same loops, so the map
+is two solvers of the same mechanism, each solving the loops with one set held:
+
+    actuators  the mechanism as written (ActuatorSpaceSolver): theta -> every joint
+    joints     the same mechanism with active_joints := joint_space: q -> every joint
+
+and their joint-rate maps S (qdot_all = S rates, ActuatorSpaceSolver.joint_rate_map):
+
+    J = dq/dtheta      the joint-space rows of the actuators' S       (D, M)
+    K = dtheta/dq      the motors' rows of the joints' S              (M, D)
+
+Power is kept, tau_m . theta_dot = tau_q . q_dot, so efforts map by the transposes:
+tau_q = K^T tau_m; tau_m = J^T tau_q, which for a redundant mechanism (M > D) is the
+effort of least weighted norm (mechanism.torque_weights) among those that make tau_q, as
+the actuators' S is the weighted map (docs/api.md). The exact motor torques of a joint-space
+motion are the joints' solver's torques (the linkage's inertia and gravity included, as
+every torque here) carried to the motors the same way, and forward dynamics in joint space
+is the joints' solver driven by K^T tau_m. No map is inverted here: where one set of
+joints cannot drive the other (a rod in line with its crank), the solver that would need
+it finds its loops singular (mechanism.max_condition_number) and the error names both
+sets. Every call keeps each solver's assembly branch (warm starts), a batch follows the
+per-sample rule.
+"""
+from typing import Any, Literal, Optional
+
+import numpy as np
+
+from ..actuator_space import ActuatorSpaceSolver, ArrayLike
+from ..errors import MechanismConfigError, SetpointError, SingularConfigurationError
+from ..mechanism import Mechanism
+from .joint_space import PARAMETER
+
+
+def joint_space_parameters(mechanism: Any) -> dict:
+    """The parameters of ``mechanism`` driven at its joint space: its assembled pose pinned
+    (settled_parameters), active_joints := joint_space."""
+    params = mechanism.settled_parameters()
+    for name in ('mechanism.joint_space', 'mechanism.torque_weights'):
+        params.pop(name, None)
+    params['mechanism.active_joints'] = list(mechanism.joint_space)
+    return params
+
+
+class Transmission:
+    """The map between ``mechanism.active_joints`` (actuator space, M) and
+    ``mechanism.joint_space`` (joint space, D): positions, velocities, Jacobian and efforts,
+    both ways. Shapes: one sample (M,) or (D,); N samples (N, M) or (N, D). Its two solvers
+    are its own (their warm starts move with its calls only), closing every pose to
+    rounding (ActuatorSpaceSolver.close_to_rounding)."""
+
+    def __init__(self, mechanism: Any, backend: str = 'auto') -> None:
+        if not getattr(mechanism, 'joint_space', None):
+            raise MechanismConfigError(
+                PARAMETER, f'{mechanism.name} names no joint space: give mechanism.joint_space '
+                           f'(the {mechanism.dof} joints a controller commands, e.g. the knee, '
+                           'the ankle pitch and roll)')
+        self.mechanism = mechanism
+        self.joint_space = list(mechanism.joint_space)
+        self.active_joints = list(mechanism.active_joints)
+        self.actuators = ActuatorSpaceSolver(mechanism, backend)
+        try:
+            self.joint_mechanism = Mechanism(joint_space_parameters(mechanism))
+        except MechanismConfigError as exc:
+            raise MechanismConfigError(
+                PARAMETER, 'the mechanism cannot be driven at its joint space: '
+                + str(exc).replace('mechanism.active_joints', 'mechanism.joint_space')) from None
+        self.joints = ActuatorSpaceSolver(self.joint_mechanism, self.actuators.backend)
+        self.joints.check_position_limits = False       # the joints' limits are not motors'
+        for solver in (self.actuators, self.joints):
+            solver.close_to_rounding()
+        self._q = [mechanism.joint_index[name] for name in self.joint_space]
+        self._theta = list(mechanism.active_index)
+        self.redundant = mechanism.is_redundant
+
+    # --- positions ----------------------------------------------------------------------
+
+    def to_joint_space(self, theta: ArrayLike) -> np.ndarray:
+        """q (D,) or (N, D) of the motors' positions theta (M,) or (N, M)."""
+        with self._named():
+            return self.actuators.solve_positions(theta)[..., self._q]
+
+    def to_actuator_space(self, q: ArrayLike) -> np.ndarray:
+        """theta (M,) or (N, M) of the joint-space positions q (D,) or (N, D): the
+        consistent motor positions (every motor, a redundant one too)."""
+        with self._named():
+            return self.joints.solve_positions(q)[..., self._theta]
+
+    # --- velocities -----------------------------------------------------------------------
+
+    def jacobian(self, theta: ArrayLike) -> np.ndarray:
+        """J = dq/dtheta (D, M) at theta, or (N, D, M)."""
+        with self._named():
+            return self.actuators.joint_rate_map(theta)[..., self._q, :]
+
+    def inverse_jacobian(self, q: ArrayLike) -> np.ndarray:
+        """K = dtheta/dq (M, D) at the joint-space position q, or (N, M, D)."""
+        with self._named():
+            return self.joints.joint_rate_map(q)[..., self._theta, :]
+
+    def joint_velocities(self, theta: ArrayLike, theta_dot: ArrayLike) -> np.ndarray:
+        """q_dot = J(theta) theta_dot: (D,) or (N, D)."""
+        return _apply(self.jacobian(theta), theta_dot)
+
+    def actuator_velocities(self, q: ArrayLike, q_dot: ArrayLike) -> np.ndarray:
+        """theta_dot = K(q) q_dot: (M,) or (N, M), the motors' rates of a joint-space motion."""
+        return _apply(self.inverse_jacobian(q), q_dot)
+
+    # --- efforts --------------------------------------------------------------------------
+
+    def actuator_efforts(self, theta: ArrayLike, tau_q: ArrayLike) -> np.ndarray:
+        """tau_m = J^T tau_q (M,) or (N, M): the motors' share of joint-space efforts at
+        theta, the linkage massless (its own inertia and gravity: :meth:`torques`);
+        redundant, the one of least weighted norm."""
+        return _apply(np.swapaxes(self.jacobian(theta), -1, -2), tau_q)
+
+    def joint_efforts(self, theta: ArrayLike, tau_m: ArrayLike) -> np.ndarray:
+        """tau_q = K^T tau_m (D,) or (N, D): the joint-space efforts the motors' efforts make
+        at theta (the linkage massless)."""
+        k = self.inverse_jacobian(self.to_joint_space(theta))
+        return _apply(np.swapaxes(k, -1, -2), tau_m)
+
+    # --- dynamics in joint space ----------------------------------------------------------
+
+    def torques(self, q: ArrayLike, qd: Optional[ArrayLike] = None,
+                qdd: Optional[ArrayLike] = None) -> np.ndarray:
+        """The exact motor torques (M,) or (N, M) of the joint-space motion (q, qd, qdd):
+        the joint-space efforts of the whole mechanism (eq. 7 with the joint space as its
+        independent coordinates), carried to the motors, tau_m = J^T tau_q (redundant: the
+        least weighted norm)."""
+        with self._named():
+            tau_q = self.joints.torques(q, qd, qdd)
+            theta = self.joints.solve_positions(q)[..., self._theta]
+            jac = self.actuators.joint_rate_map(theta)[..., self._q, :]
+        return _apply(np.swapaxes(jac, -1, -2), tau_q)
+
+    def forward_dynamics(self, q: ArrayLike, qd: Optional[ArrayLike],
+                         tau_m: Optional[ArrayLike]) -> np.ndarray:
+        """The joint-space accelerations (D,) or (N, D) the motors' efforts tau_m produce at
+        the joint-space state (q, qd), with gravity: the joints' forward dynamics under
+        tau_q = K^T tau_m."""
+        with self._named():
+            k = self.joints.joint_rate_map(q)[..., self._theta, :]
+            tau = np.zeros(k.shape[:-2] + k.shape[-2:-1]) if tau_m is None else tau_m
+            tau_q = _apply(np.swapaxes(k, -1, -2), tau)
+            return self.joints.forward_dynamics(q, qd, tau_q)
+
+    # --- helpers --------------------------------------------------------------------------
+
+    def _singular(self, error: SingularConfigurationError) -> SingularConfigurationError:
+        where = '' if error.sample is None else f' at sample {error.sample}'
+        return SingularConfigurationError(
+            f"the transmission between the motors ({', '.join(self.active_joints)}) and the "
+            f"joint space ({', '.join(self.joint_space)}) is singular{where} (condition number "
+            f'{error.condition_number:.3g}, over mechanism.max_condition_number '
+            f'{self.mechanism.max_condition_number:g}): a rod in line with its crank or '
+            'lever; one set cannot drive the other there', error.condition_number,
+            error.sample)
+
+    def _named(self) -> '_NamedSingular':
+        return _NamedSingular(self)
+
+
+class _NamedSingular:
+    """Re-raises a solver's SingularConfigurationError naming both sets of joints."""
+
+    def __init__(self, transmission: Transmission) -> None:
+        self.transmission = transmission
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: Any, exc: Any, tb: Any) -> Literal[False]:
+        if isinstance(exc, SingularConfigurationError) and 'transmission' not in str(exc):
+            raise self.transmission._singular(exc) from exc
+        return False
+
+
+def _apply(matrices: np.ndarray, vectors: ArrayLike) -> np.ndarray:
+    """matrices @ vectors, one sample ((R, C) @ (C,)) or N ((N, R, C) @ (N, C))."""
+    v = np.asarray(vectors, dtype=float)
+    if matrices.ndim == 2:
+        if v.shape != matrices.shape[1:]:
+            raise _shape(matrices.shape[1], v.shape)
+        return matrices @ v
+    if v.shape != (matrices.shape[0], matrices.shape[2]):
+        raise _shape(matrices.shape[2], v.shape, matrices.shape[0])
+    return np.einsum('nrc,nc->nr', matrices, v)
+
+
+def _shape(width: int, got: tuple, samples: Optional[int] = None) -> Exception:
+    want = f'({width},)' if samples is None else f'({samples}, {width})'
+    return SetpointError(f'expected an array of shape {want}, got {got}')
