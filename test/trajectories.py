@@ -73,6 +73,11 @@ DRIVERS = {
                             'motor_knee': _law(0.0, 0.0, [(0.0, 0.4, PI)]),
                             'motor_ankle': _law(0.0, 0.0, [(0.06, 0.0, PI)]),
                             'motor_shin': _law(0.023090923393947464, 0.0, [(0.25, 0.0, PI)])},
+    # the knee bends and straightens through its four-bar
+    'four_bar_knee.yaml': {'motor_knee': _law(0.0, 0.0, [(0.5, 0.0, PI)])},
+    # both motors together (pitch) with some of them against each other (roll)
+    'parallel_ankle.yaml': {'motor_left': _law(0.0, 0.0, [(0.3, 0.0, PI), (0.1, 0.0, 2 * PI)]),
+                            'motor_right': _law(0.0, 0.0, [(0.3, 0.0, PI), (-0.1, 0.0, 2 * PI)])},
 }
 
 
@@ -302,4 +307,4 @@ for _twin, _original in TWINS.items():
 #: (test/description/test_urdf.py and test_loop_closure_file.py check those against
 #: Pinocchio's own URDF parser)
 NOT_FOR_ORACLE = set(TWINS) | {'crank_rocker_urdf.yaml', 'five_bar_robot.yaml',
-                                'talos_like_leg.yaml'}
+                                'talos_like_leg.yaml', 'parallel_ankle.yaml'}
