@@ -13,7 +13,8 @@ Every 10 s it reads the node's resident memory (VmRSS of /proc/<pid>/status) and
 /diagnostics counters. At the end it accounts for every message: each measured state sent
 is accepted or rejected by the node (else lost on the way to it), each accepted one and
 each timeout is answered by a command the plant received (else lost on the way back). It
-prints that, the largest gap between two commands, how far this process (the plant) ever
+prints that, the largest gap between two commands, every gap longer than 10 ms (whether
+the plant itself was late then, or the node and DDS), how far this process (the plant) ever
 fell behind its own clock, the RSS at each minute and its growth over the second half,
 and the worst tracking error. Exit status 0 when nothing was lost or rejected, the RSS grew
 by less than 5 MB over the second half, and no measurement_timeout went off during the run
@@ -27,7 +28,6 @@ import math
 import os
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
@@ -37,6 +37,24 @@ REPO = os.path.dirname(HERE)
 NS = 1_000_000_000
 #: s: the node's measurement_timeout in the soak
 MEASUREMENT_TIMEOUT = 0.5
+#: s: a gap between two commands longer than this is counted (and said whose it was)
+GAP = 0.010
+#: s: the plant sending a state this late counts as the plant's own stall
+LATE = 0.002
+#: s: a bare process sleeping 1 ms at a time that wakes this late: the machine stalled
+PROBE_LATE = 0.005
+#: the bare process: prints "<monotonic woke> <s late>" for every oversleep, until SIGTERM
+PROBE = f"""
+import signal, sys, time
+late = []
+signal.signal(signal.SIGTERM, lambda *a: (print("\\n".join(late), flush=True), sys.exit(0)))
+while True:
+    before = time.monotonic()
+    time.sleep(0.001)
+    woke = time.monotonic()
+    if woke - before - 0.001 > {PROBE_LATE}:
+        late.append(f"{{woke}} {{woke - before - 0.001}}")
+"""
 
 
 def rss_mb(pid):
@@ -56,7 +74,6 @@ class Plant:
     def __init__(self, mechanism):
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
@@ -76,19 +93,28 @@ class Plant:
         self.running = True                     # False once the last state was sent
         self.worst_late, self.worst_late_at = 0.0, 0.0     # s the plant was behind, when
         self.diagnostics = {}
-        self.node.create_subscription(Float64MultiArray, '/soak/effort_command',
-                                      self._on_command, control_qos())
-        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self.msg = JointState
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
-        threading.Thread(target=self.executor.spin, daemon=True).start()
+        self.gaps = []                          # (ending at s since started, length s)
+        self.late = []                          # (monotonic, s) the plant sent late by > LATE
+        # no rclpy executor here (bench/receivers.py): its delays would count as the node's
+        from receivers import listen
+        self.loops = [listen(self.node, Float64MultiArray, '/soak/effort_command',
+                             self._on_command, control_qos()),
+                      listen(self.node, DiagnosticArray, '/diagnostics', self._on_diagnostics,
+                             10)]
+
+    def stop(self):
+        for loop in self.loops:
+            loop.stop()
 
     def _on_command(self, msg):
         now = time.monotonic()
-        if self.running and self.last_arrival is not None and \
-                now - self.last_arrival > self.worst_gap:
-            self.worst_gap, self.worst_gap_at = now - self.last_arrival, now - self.started
+        if self.running and self.last_arrival is not None:
+            gap = now - self.last_arrival
+            if gap > self.worst_gap:
+                self.worst_gap, self.worst_gap_at = gap, now - self.started
+            if gap > GAP:
+                self.gaps.append((now - self.started, gap, self.last_arrival))
         self.last_arrival = now
         self.latest = list(msg.data)
         self.received += 1
@@ -129,6 +155,7 @@ def main(argv=None):
          '-p', 'kp:=[100.0]', '-p', 'kd:=[20.0]',
          '-p', f'measurement_timeout:={MEASUREMENT_TIMEOUT}'],
         stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, cwd=REPO)
+    probe = subprocess.Popen([sys.executable, '-c', PROBE], stdout=subprocess.PIPE, text=True)
     plant = Plant(mech)
     active, every = list(mech.active_joints), list(mech.joints)
     samples, sent, resets, worst_error = [], 0, 0, 0.0
@@ -154,6 +181,8 @@ def main(argv=None):
                     time.sleep(due - now - 0.0004)
             if now - due > plant.worst_late:     # this process itself behind its clock
                 plant.worst_late, plant.worst_late_at = now - due, k * period
+            if now - due > LATE:
+                plant.late.append((time.monotonic(), now - due))
             t = k * period
             stamp = stamp0 + int(t * NS)
             q_d = q0 + amplitude * math.sin(math.pi * t)
@@ -177,6 +206,10 @@ def main(argv=None):
         time.sleep(MEASUREMENT_TIMEOUT + 2.0)
         samples.append((args.minutes * 60, rss_mb(node.pid), dict(plant.diagnostics)))
     finally:
+        probe.terminate()
+        plant.machine = [tuple(map(float, line.split())) for line in probe.communicate()[0].split('\n')
+                         if line.strip()]
+        plant.stop()
         node.send_signal(2)
         try:
             node.wait(15)
@@ -217,6 +250,20 @@ def report(args, sent, plant, samples, resets, worst_error):
           f'process) at worst {plant.worst_late * 1e3:.1f} ms behind its clock (t = '
           f'{plant.worst_late_at:.1f} s); worst tracking error {worst_error:.3g}; plant '
           f"resets {resets}; node compute median {last.get('compute_time_median_us')} us")
+    # a gap whose time the plant itself spent late (sending its states) is the plant's; one
+    # during which a bare sleeping process (PROBE) overslept too is the machine's
+    plants = [(at, gap) for at, gap, start in plant.gaps
+              if any(start - LATE <= t <= start + gap for t, _ in plant.late)]
+    machine = [(at, gap) for at, gap, start in plant.gaps
+               if any(woke - late <= start + gap and woke >= start
+                      for woke, late in getattr(plant, 'machine', ()))]
+    neither = [(at, gap) for at, gap, _ in plant.gaps
+               if (at, gap) not in plants and (at, gap) not in machine]
+    print(f'gaps between commands longer than {GAP * 1e3:g} ms: {len(plant.gaps)}: '
+          f'{len(plants)} while the plant itself was more than {LATE * 1e3:g} ms late, '
+          f'{len(machine)} while a bare sleeping process overslept more than '
+          f'{PROBE_LATE * 1e3:g} ms (the machine), {len(neither)} neither (the node or DDS); '
+          + ', '.join(f'{gap * 1e3:.1f} ms at t = {at:.1f} s' for at, gap, _ in plant.gaps[:10]))
     # one timeout is the end of the stream (the drain waits for it); others, in the run
     in_run = max(0, timeouts - 1)
     if in_run:
@@ -235,6 +282,9 @@ def report(args, sent, plant, samples, resets, worst_error):
                        'lost_to_node': to_node, 'lost_to_plant': to_plant,
                        'rejected': rejected, 'timeouts': timeouts, 'rss': rss,
                        'growth_mb': growth, 'worst_gap_s': plant.worst_gap,
+                       'gaps': [(at, gap) for at, gap, _ in plant.gaps],
+                       'plant_gaps': plants, 'machine_gaps': machine,
+                       'node_gaps': neither,
                        'worst_late_s': plant.worst_late, 'worst_error': worst_error,
                        'resets': resets, 'diagnostics': last}, stream, indent=1)
     stalled_node = in_run != 0 and plant.worst_late < MEASUREMENT_TIMEOUT

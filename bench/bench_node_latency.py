@@ -56,23 +56,26 @@ ECHOES = ('/echo', '/lean')   # namespaces of the echo nodes (their answers carr
 DRAIN = 0.3
 
 
-def echo_main(mode):
+def echo_main(mode, qos='control'):
     """An echo node: joint_setpoint positions -> effort_command, nothing else.
 
     ``mode`` 'executor': a subscription callback on a SingleThreadedExecutor (plain rclpy);
-    'loop': the node's dedicated setpoint loop around the same copy.
+    'loop': the node's dedicated setpoint loop around the same copy. ``qos``: its input's,
+    'control' (reliable, topics.control_qos) or 'stream' (best effort, topics.stream_qos:
+    the node's control-rate inputs); the output is reliable, as the node's.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from cog_id_ros.ros.node import control_qos
+    from cog_id_ros.ros.topics import control_qos, stream_qos
 
     rclpy.init()
     node = rclpy.create_node('echo_node')
     pub = node.create_publisher(Float64MultiArray, 'effort_command', control_qos())
     out = Float64MultiArray()
+    reader = stream_qos() if qos == 'stream' else control_qos()
 
     def on_setpoint(msg):
         out.data = msg.position
@@ -81,10 +84,10 @@ def echo_main(mode):
     loop = None
     if mode == 'loop':
         from cog_id_ros.ros.setpoint_loop import SetpointLoop
-        loop = SetpointLoop(node, JointState, 'joint_setpoint', on_setpoint, control_qos())
+        loop = SetpointLoop(node, JointState, 'joint_setpoint', on_setpoint, reader)
         loop.start()
     else:
-        node.create_subscription(JointState, 'joint_setpoint', on_setpoint, control_qos())
+        node.create_subscription(JointState, 'joint_setpoint', on_setpoint, reader)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     print('echo node ready', flush=True)
@@ -99,53 +102,43 @@ def echo_main(mode):
         rclpy.try_shutdown()
 
 
+def reader_qos():
+    """The driver's subscriptions to the commands: reliable, deep enough for a whole block."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
+                      reliability=ReliabilityPolicy.RELIABLE)
+
+
 class Driver:
     """Publishes setpoints on schedule (main thread, sleeping between them) and timestamps
-    the answers (one SetpointLoop thread per command topic, outside any executor, so the
-    driver's own executor is not what is measured); /diagnostics on an executor thread."""
+    the answers (one SetpointLoop thread per command topic, and one for /diagnostics:
+    bench/receivers.py; no executor, so the driver's own executor is not what is
+    measured)."""
 
     def __init__(self, namespaces, names=('joint3', 'joint1'), positions=None):
-        import threading
-
-        from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from receivers import Diagnostics, listen
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
-        from cog_id_ros.ros.node import control_qos
-        from cog_id_ros.ros.setpoint_loop import SetpointLoop
+        from cog_id_ros.ros.topics import control_qos
 
         self.JointState = JointState
         self.names = list(names)
         self.positions = positions or (lambda t: [math.pi / 2 + 0.5 * math.sin(math.pi * t)] * 2)
         self.node = rclpy.create_node('bench_driver', start_parameter_services=False)
-        reader = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
-                            reliability=ReliabilityPolicy.RELIABLE)
         self.pubs = {ns: self.node.create_publisher(JointState, f'{ns}/joint_setpoint',
                                                     control_qos()) for ns in namespaces}
-        self.loops = [SetpointLoop(self.node, Float64MultiArray, f'{ns}/effort_command',
-                                   self._on_command, reader) for ns in namespaces]
         self.recv = None            # arrival times by sequence number (echo nodes)
         self.commands = []          # arrival times in order (cog_id_node)
-        self.diagnostics = {}       # namespace -> {key: value} of its latest DiagnosticStatus
-        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
-        for loop in self.loops:
-            loop.start()
-        threading.Thread(target=self._spin, daemon=True).start()
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:   # noqa: BLE001 (shutdown at the end of the run)
-            pass
+        self.reports = Diagnostics(self.node)
+        self.loops = [listen(self.node, Float64MultiArray, f'{ns}/effort_command',
+                             self._on_command, reader_qos()) for ns in namespaces]
 
     def close(self):
         for loop in self.loops:
             loop.stop()
+        self.reports.close()
 
     def _on_command(self, msg):
         t = time.perf_counter()
@@ -156,25 +149,15 @@ class Driver:
             else:                    # cog_id_node: torques only, matched by order
                 self.commands.append(t)
 
-    def _on_diagnostics(self, msg):
-        for status in msg.status:
-            ns = '/' + status.name.split('/')[1] if status.name.count('/') > 1 else None
-            if ns is not None:
-                self.diagnostics[ns] = {kv.key: kv.value for kv in status.values}
-
     def node_compute_times(self, namespaces):
         """{namespace: (median, max, publish median)}: each cog_id_node's own compute time
         per setpoint, receipt to command ready to send, and the time of the command's publish
         after it (its /diagnostics, over its last 1000 setpoints), from reports made after
         the run."""
-        self.diagnostics = {}
-        end = time.perf_counter() + 3.0
-        time.sleep(1.2)
-        while time.perf_counter() < end and not all(ns in self.diagnostics for ns in namespaces):
-            time.sleep(0.1)
+        reports = self.reports.wait(namespaces, time.perf_counter(), 3.0)
         out = {}
         for ns in namespaces:
-            get = self.diagnostics.get(ns, {}).get
+            get = reports[ns].get
             out[ns] = (float(get('compute_time_median_us') or 'nan'),
                        float(get('compute_time_max_us') or 'nan'),
                        float(get('publish_time_median_us') or 'nan'))
@@ -249,13 +232,18 @@ def percentiles(lat):
 
 
 def start(args, env, ready):
-    """Start a node; wait for the line that says it is ready."""
+    """Start a node; wait for the line that says it is ready. What it prints after that
+    is read by a thread (a pipe nobody reads fills up and stops the node) and kept in
+    ``proc.lines``."""
+    import threading
     proc = subprocess.Popen(args, env=env, cwd=REPO, stdin=subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     line = proc.stdout.readline()
     if ready not in line:
         proc.kill()
         raise RuntimeError(f'{args[0]} did not start: {line}{proc.stdout.read()}')
+    proc.lines = []
+    threading.Thread(target=lambda: proc.lines.extend(proc.stdout), daemon=True).start()
     return proc
 
 
@@ -293,6 +281,8 @@ def round_differences(medians, label, reference):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--echo', choices=('executor', 'loop'), help=argparse.SUPPRESS)
+    parser.add_argument('--echo-qos', choices=('control', 'stream'), default='control',
+                        help=argparse.SUPPRESS)
     parser.add_argument('--rates', type=float, nargs='+', default=[1000.0, 2000.0])
     parser.add_argument('--duration', type=float, default=10.0, help='s per node and rate')
     parser.add_argument('--block', type=float, default=1.0,
@@ -308,7 +298,7 @@ def main(argv=None):
     from rclpy.utilities import remove_ros_args
     args = parser.parse_args(remove_ros_args(sys.argv if argv is None else argv)[1:])
     if args.echo:
-        return echo_main(args.echo)
+        return echo_main(args.echo, args.echo_qos)
 
     env = dict(os.environ)
     env.setdefault('ROS_DOMAIN_ID', str(102 + os.getpid() % 100))
