@@ -1,7 +1,7 @@
 """cog_id_torques: actuator torques of a closed-link mechanism along a CSV trajectory.
 
     cog_id_torques --params-file config/X.yaml --input traj.csv --output torques.csv \
-        [--plot torques.png]
+        [--plot torques.png] [--space joint]
 
 The run, step by step (:func:`run`): the paths checked (:mod:`cog_id_ros.offline.outputs`),
 the mechanism loaded, the trajectory read (:mod:`cog_id_ros.offline.trajectory_io`), angles
@@ -9,7 +9,9 @@ unwrapped and jumps found (:mod:`cog_id_ros.offline.jumps`,
 :mod:`cog_id_ros.offline.skipped_rows`), absent velocities and accelerations estimated
 (:mod:`cog_id_ros.offline.samples`), the samples solved in chunks
 (:mod:`cog_id_ros.offline.solving`), the efforts and the plot written atomically, and a
-summary printed (:mod:`cog_id_ros.offline.summary`). No ROS import: the tool runs wherever
+summary printed (:mod:`cog_id_ros.offline.summary`). With ``--space joint`` the input
+is a motion of ``mechanism.joint_space`` and the output still the motors' torques
+(:mod:`cog_id_ros.offline.joint_space_solving`). No ROS import: the tool runs wherever
 numpy does.
 """
 
@@ -22,7 +24,15 @@ import time as _time
 import numpy as np
 
 from ..core.kernels import BACKENDS
-from . import derivatives, jumps, outputs, samples, skipped_rows, trajectory_io
+from . import (
+    derivatives,
+    joint_space_solving,
+    jumps,
+    outputs,
+    samples,
+    skipped_rows,
+    trajectory_io,
+)
 from .console import (
     EXIT_BROKEN_PIPE,
     EXIT_INPUT,
@@ -60,6 +70,8 @@ input CSV (comma-separated, header row first):
   <joint>.velocity     optional; estimated from the positions when absent
   <joint>.acceleration optional; estimated from the velocity column when present,
                        else from the positions
+  With --space joint: <joint> is each joint of mechanism.joint_space instead (the
+  joints a controller commands), and the output is still the active joints' efforts.
   Columns of non-active joints of the mechanism are ignored with a note; a
   <name>.position|velocity|acceleration column whose <name> is not a joint of the
   mechanism is an error; any other column is ignored with a note.
@@ -128,6 +140,12 @@ def build_parser():
     parser.add_argument('--plot', metavar='FILE',
                         help='also draw efforts against time (format from the extension: '
                              'png, pdf, svg, ...)')
+    parser.add_argument('--space', choices=('actuator', 'joint'), default='actuator',
+                        help='what the input columns are: actuator (default: the active '
+                             'joints, the motors) or joint (mechanism.joint_space, the joints '
+                             "a controller commands); the output is the motors' torques "
+                             "either way, the exact ones (the linkage's inertia and gravity "
+                             'included; docs/transmission.md)')
     parser.add_argument('--json', action='store_true',
                         help='print the summary as one JSON object instead of a table')
     parser.add_argument('--skip-invalid', action='store_true',
@@ -199,7 +217,14 @@ def run(args, stdout, stderr, signals=None):
     plot_format = outputs.check_paths(args)
     mech, solver = load_mechanism(args)
     active = list(mech.active_joints)
-    traj, (q, qd, qdd, estimated), keep, jump_skips, unwrapped = _read(args, mech, stderr)
+    motor_rates = None
+    if getattr(args, 'space', 'actuator') == 'joint':
+        solver = joint_space_solving.JointSpaceSolver(
+            joint_space_solving.transmission_of(mech, solver, args.params_file))
+    traj, (q, qd, qdd, estimated), keep, jump_skips, unwrapped = _read(
+        args, solver.mechanism, stderr)
+    if solver.mechanism is not mech:
+        motor_rates = np.zeros((len(traj), len(active)))
     n = len(traj)
     to_solve = int(np.count_nonzero(keep))
     wanted = ProgressBar.wanted(to_solve, stderr, args.no_progress)
@@ -207,9 +232,10 @@ def run(args, stdout, stderr, signals=None):
     progress.update(0)
     try:
         efforts, valid, skipped = solve(solver, q, qd, qdd, args.chunk_size, args.skip_invalid,
-                                        progress, args.input, np.flatnonzero(keep))
+                                        progress, args.input, np.flatnonzero(keep), motor_rates)
     finally:
         progress.close()
+    qd = qd if motor_rates is None else motor_rates     # the summary's power is the motors'
     skipped = sorted(jump_skips + skipped, key=lambda skip: skip.row)
     _report_skipped(skipped, args.input, stderr)
     elapsed = _time.perf_counter() - started
@@ -226,7 +252,9 @@ def run(args, stdout, stderr, signals=None):
 def _read(args, mech, stderr):
     """The trajectory of --input, its samples ``(q, qd, qdd, estimated columns)``, the rows
     to solve (bool mask), the [Skip] of the jumps and the unwrapped columns (or None); the
-    notes on stderr. ToolError naming the row and column of a bad trajectory."""
+    notes on stderr. ToolError naming the row and column of a bad trajectory. ``mech``'s
+    active joints name the columns (--space joint: the mechanism driven at its joint
+    space)."""
     active = list(mech.active_joints)
     kinds = mech.active_kinds
     unwrapped = None
@@ -234,7 +262,9 @@ def _read(args, mech, stderr):
         # every joint of the mechanism, those without a coordinate too (their columns are
         # ignored like any passive joint's, not called unknown)
         traj = trajectory_io.read_trajectory(
-            args.input, list(mech.joints) + list(mech.closure_joints), active)
+            args.input, list(mech.joints) + list(mech.closure_joints), active,
+            role=(joint_space_solving.ROLE if getattr(args, 'space', 'actuator') == 'joint'
+                  else 'active joint'))
         for note in traj.notes:
             print(f'{PROG}: note: {args.input}: {note}', file=stderr)
         if getattr(args, 'unwrap', False):

@@ -56,16 +56,20 @@ def _overflow_error(sample):
         'or velocities are too large to compute with', sample=sample, reason='out_of_range')
 
 
-def solve(solver, q, qd, qdd, chunk, skip_invalid, progress, path, rows=None):
+def solve(solver, q, qd, qdd, chunk, skip_invalid, progress, path, rows=None, rates=None):
     """Efforts (N, M), valid (N,), and the [Skip] of the rows the solver could not serve.
 
     ``rows``: the 0-based rows to solve (default all), in order; the others stay invalid
-    and are not reported here. With ``skip_invalid``, a row-level error the core raises
+    and are not reported here. M is the width of the solver where it has one (a joint-space
+    motion: :mod:`cog_id_ros.offline.joint_space_solving`), else the samples' width;
+    ``rates`` (N, M), optional: filled with the evaluations' ``rates`` (the motors' rates
+    of a joint-space motion). With ``skip_invalid``, a row-level error the core raises
     instead of marking (e.g. 'out_of_range') skips that row too: the rows before it in
     its chunk are solved again and the run goes on after it.
     """
     import cog_id_ros
-    n, m = q.shape
+    n = q.shape[0]
+    m = getattr(solver, 'width', q.shape[1])
     rows = np.arange(n) if rows is None else np.asarray(rows)
     efforts = np.zeros((n, m))
     valid = np.zeros(n, bool)
@@ -115,6 +119,8 @@ def solve(solver, q, qd, qdd, chunk, skip_invalid, progress, path, rows=None):
                             EXIT_INPUT) from None
         efforts[idx] = torques
         valid[idx] = ok
+        if rates is not None and getattr(ev, 'rates', None) is not None:
+            rates[idx] = ev.rates
         for i in np.flatnonzero(~ok).tolist():
             exc = errors[i]
             skipped.append(Skip(int(idx[i]) + 1, _reason(exc),

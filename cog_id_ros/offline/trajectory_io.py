@@ -129,9 +129,11 @@ def _read_text(path):
     return text
 
 
-def _classify_header(path, names, joints, active_joints, fields=FIELDS, required='position'):
+def _classify_header(path, names, joints, active_joints, fields=FIELDS, required='position',
+                     role='active joint'):
     """Map the header to used columns (``<joint>.<field>`` for ``fields``; ``required`` the
-    field every active joint must have); returns ({name: index}, notes)."""
+    field every active joint must have; ``role``: what the read joints are called in the
+    messages); returns ({name: index}, notes)."""
     joints = list(joints)
     active = list(active_joints)
     joint_set = set(joints)
@@ -170,12 +172,14 @@ def _classify_header(path, names, joints, active_joints, fields=FIELDS, required
         col = joint_column(joint, required)
         if col not in used:
             raise TrajectoryError(
-                path, f"missing column '{col}' (the {required} of active joint {joint})",
+                path, f"missing column '{col}' (the {required} of {role} {joint})",
                 header=True, column=col)
     notes = []
     if ignored_inactive:
+        article = 'an' if role[0] in 'aeiou' else 'a'
+        which = 'active' if role == 'active joint' else f'{role}s'
         notes.append('ignoring ' + _name_list(ignored_inactive)
-                     + ': not an active joint (active: ' + ', '.join(active) + ')')
+                     + f': not {article} {role} ({which}: ' + ', '.join(active) + ')')
     if ignored_other:
         notes.append('ignoring column(s) ' + _name_list(ignored_other)
                      + ': not time or <joint>.' + '|'.join(fields))
@@ -276,14 +280,16 @@ def _locate_bad_cell(path, lines, n_columns, order, numpy_message):
 
 def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequence[str],
                     fields: Sequence[str] = FIELDS, required: str = 'position',
-                    first_row: Sequence[str] = ()) -> 'Trajectory':
+                    first_row: Sequence[str] = (), role: str = 'active joint') -> 'Trajectory':
     """Read and validate a trajectory CSV for a mechanism (``joints``, ``active_joints``).
 
     ``fields``: the ``<joint>.<field>`` columns read (a trajectory's position, velocity and
     acceleration; ``cog_id_simulate`` reads an efforts file with effort, position and
     velocity); ``required``: the field every active joint must have a column of;
     ``first_row``: fields of ``fields`` read on the first data row only (the other rows'
-    cells are not parsed), into ``Trajectory.first_row`` {column name: float}.
+    cells are not parsed), into ``Trajectory.first_row`` {column name: float}; ``role``:
+    what ``active_joints`` are called in the messages ('joint-space joint' for
+    ``cog_id_torques --space joint``).
 
     Raises :class:`TrajectoryError` naming the row and column of the first problem:
     a missing, duplicate or unknown column, a ragged or blank row, a cell that is not a
@@ -298,7 +304,7 @@ def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequen
         raise TrajectoryError(path, 'the file is empty; expected a header row such as '
                               f"'{TIME},{joint_column(active_joints[0], required)}'", line=1)
     names = [name.strip() for name in _cells(lines[0])]
-    used, notes = _classify_header(path, names, joints, active_joints, fields, required)
+    used, notes = _classify_header(path, names, joints, active_joints, fields, required, role)
     if len(lines) < 2:
         raise TrajectoryError(path, 'no data rows after the header', header=True)
     once = {name: i for name, i in used.items() if name.rpartition('.')[2] in first_row}
