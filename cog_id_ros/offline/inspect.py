@@ -1,6 +1,7 @@
 """cog_id_inspect: what a mechanism parameter file describes, and how it assembled.
 
     cog_id_inspect --params-file config/X.yaml [--plot pose.png] [--trajectory motion.csv]
+                   [--transmission map.png]
 
 Prints the spanning tree the solver built (base link first; a spherical, universal or
 fixed joint in it as one hop, by its declared name), the loops and the joints that close
@@ -10,8 +11,11 @@ where an actuator moved, or a passive joint moved further than the loader's "far
 threshold: the assembly probably took another branch than the one meant), and the closure
 residual and condition number at that pose. ``--plot`` draws the mechanism there
 (:mod:`cog_id_ros.offline.mechanism_plot`), ``--trajectory`` adds snapshots along a motion
-in the input format of ``cog_id_torques``. Pure reporting: nothing is changed or written
-but the picture. No ROS import. docs/inspect.md has an example.
+in the input format of ``cog_id_torques``. A mechanism that names ``mechanism.joint_space``
+is drawn with both spaces labelled (:mod:`cog_id_ros.offline.joint_space_marks`), and
+``--transmission`` plots the map between them over each joint-space joint's range
+(:mod:`cog_id_ros.offline.transmission_plot`). Pure reporting: nothing is changed or written
+but the pictures. No ROS import. docs/inspect.md has an example.
 """
 
 import argparse
@@ -44,6 +48,9 @@ TRACEBACK_ENV = 'COG_ID_INSPECT_TRACEBACK'
 
 #: the solver behind the report: it solves a handful of poses, so nothing is compiled
 BACKEND = 'reference'
+#: the transmission's solvers (--transmission): a few hundred poses, traced kernels (nothing
+#: compiled either, three times the reference's speed)
+TRANSMISSION_BACKEND = 'python'
 DEFAULT_SNAPSHOTS = 6
 MAX_SNAPSHOTS = 12
 
@@ -57,13 +64,15 @@ what it prints:
   WARNING lines where an actuator moved or a passive joint moved more than the loader's
   threshold (the assembly probably took another branch: set initial_positions near the
   pose you mean), then the closure residual and the closure Jacobian condition number at
-  the assembled pose.
+  the assembled pose. With mechanism.joint_space: the joint space beside the actuator
+  space, and with --transmission the ratio and conditioning of the map between them.
 
 exit status:
   {EXIT_OK}  success (also with warnings)
   {EXIT_INPUT}  the --trajectory CSV was rejected (one line names the row and column)
   {EXIT_USAGE}  command line, or a parameter file that cannot be read or honoured (one line
-     naming the parameter). A mechanism refused for idle spins (rods that spin about their
+     naming the parameter); --transmission of a mechanism without
+     mechanism.joint_space. A mechanism refused for idle spins (rods that spin about their
      own axes: mechanism.locked_joints) is still reported and drawn as it loads with
      idle_spins: lock, the spinning sets and the joints that would be locked marked
   {EXIT_WRITE}  the picture cannot be written
@@ -92,6 +101,12 @@ def build_parser():
     parser.add_argument('--snapshots', type=_snapshot_count, default=DEFAULT_SNAPSHOTS,
                         metavar='N', help=f'snapshots of --trajectory drawn (default '
                                           f'{DEFAULT_SNAPSHOTS}, at most {MAX_SNAPSHOTS})')
+    parser.add_argument('--transmission', metavar='FILE',
+                        help='plot the transmission between actuator space and '
+                             'mechanism.joint_space: over the range of each joint-space joint '
+                             '(its limits, or as far as the map stays non-singular) the '
+                             'singular values (1 x 1: the ratio) and the condition number of '
+                             'J = dq/dtheta (format from the extension)')
     parser.add_argument('--node-name', default=None, metavar='NAME',
                         help='node entry of the parameter file to read (default: the '
                              "core's default, which also accepts /**)")
@@ -114,7 +129,10 @@ def main(argv: 'list[str] | None' = None) -> int:
 
 def run(args, stdout, stderr):
     plot_format = _check_plot_path(args)
+    map_format = _check_plot_path(args, '--transmission')
     mech, solver, refused = load(args)
+    if args.transmission:
+        _need_joint_space(mech)
     evaluation = solver.evaluate([mech.assembled_positions[j] for j in mech.active_index],
                                  on_invalid='skip')
     text = format_report(mech, evaluation, args.params_file)
@@ -133,6 +151,8 @@ def run(args, stdout, stderr):
         _draw(args, mech, mech.assembled_coordinates,
               motion, plot_format)
         text += f'\n\nwrote {args.plot}'
+    if args.transmission:
+        text += '\n\n' + '\n'.join(_draw_transmission(args, mech, map_format))
     if stdout is None:
         raise BrokenPipeError('stdout is closed')
     stdout.write(text + '\n')
@@ -144,8 +164,12 @@ def run(args, stdout, stderr):
 
 def format_report(mech, evaluation, params_file):
     """The whole text report (without the trajectory part)."""
+    actuation = format_actuation(mech)
+    if getattr(mech, 'joint_space', None):
+        actuation.append(f"joint space (what a controller commands): {', '.join(mech.joint_space)}"
+                         f"; actuator space (the motors): {', '.join(mech.active_joints)}")
     sections = [format_header(mech, params_file), format_structure(mech),
-                format_actuation(mech), format_joint_table(mech), format_closure(mech, evaluation)]
+                actuation, format_joint_table(mech), format_closure(mech, evaluation)]
     return '\n\n'.join('\n'.join(lines) for lines in sections)
 
 
@@ -193,25 +217,32 @@ def load(args):
             raise ToolError(refused, EXIT_USAGE) from None
 
 
-def _check_plot_path(args):
-    """Fail before any solving on a --plot path that cannot work; returns its format."""
-    if args.plot is None:
+def _check_plot_path(args, option='--plot'):
+    """Fail before any solving on a --plot (or ``option``) path that cannot work; returns
+    its format."""
+    path = getattr(args, option.lstrip('-'), None)
+    if path is None:
         return None
-    path = args.plot
     if not path or path.endswith(('/', os.sep)):
-        raise ToolError(f'--plot {path!r}: give a file name', EXIT_USAGE)
-    target, _ = output_target('--plot', path)
-    for option, other in (('--params-file', args.params_file),
-                          ('--trajectory', args.trajectory)):
+        raise ToolError(f'{option} {path!r}: give a file name', EXIT_USAGE)
+    target, _ = output_target(option, path)
+    if option != '--plot' and args.plot and os.path.abspath(args.plot) == os.path.abspath(path):
+        raise ToolError(f'{option} {path}: is the same file as --plot', EXIT_USAGE)
+    for other_option, other in (('--params-file', args.params_file),
+                                ('--trajectory', args.trajectory)):
         if other and os.path.exists(target) and os.path.exists(other) \
                 and os.path.samefile(target, other):
-            raise ToolError(f'--plot {path}: is the {option} file', EXIT_USAGE)
+            raise ToolError(f'{option} {path}: is the {other_option} file', EXIT_USAGE)
     try:
         from . import plotting
         formats = plotting.supported_formats()
     except ImportError:
-        raise ToolError('--plot needs matplotlib (pip install matplotlib)', EXIT_USAGE) from None
-    return plot_format(path, formats)
+        raise ToolError(f'{option} needs matplotlib (pip install matplotlib)',
+                        EXIT_USAGE) from None
+    try:
+        return plot_format(path, formats)
+    except ToolError as exc:
+        raise ToolError(str(exc).replace('--plot', option, 1), EXIT_USAGE) from None
 
 
 def _draw(args, mech, positions, motion, fmt):
@@ -231,6 +262,36 @@ def _draw(args, mech, positions, motion, fmt):
     except OSError as exc:
         raise ToolError(f'--plot {args.plot}: cannot write: {exc.strerror or exc}',
                         EXIT_WRITE) from None
+
+
+def _draw_transmission(args, mech, fmt):
+    """--transmission: the sweeps drawn into the file; the report's lines. ToolError naming
+    mechanism.joint_space without one (EXIT_USAGE), or the file (EXIT_WRITE)."""
+    import cog_id_ros
+
+    from . import transmission_plot
+    _need_joint_space(mech)
+    try:
+        sweeps = transmission_plot.sweep(cog_id_ros.Transmission(mech, TRANSMISSION_BACKEND))
+    except cog_id_ros.CogIdError as exc:
+        raise ToolError(f'--transmission: {" ".join(str(exc).split())}', EXIT_USAGE) from None
+    try:
+        with atomic_files.atomic_output(args.transmission) as tmp:
+            transmission_plot.draw_transmission(tmp, mech, sweeps, fmt)
+    except atomic_files.OutputPathError as exc:
+        raise ToolError(f'--transmission {args.transmission}: {exc}', EXIT_WRITE) from None
+    except OSError as exc:
+        raise ToolError(f'--transmission {args.transmission}: cannot write: '
+                        f'{exc.strerror or exc}', EXIT_WRITE) from None
+    return transmission_plot.format_sweeps(sweeps) + [f'wrote {args.transmission}']
+
+
+def _need_joint_space(mech):
+    if not getattr(mech, 'joint_space', None):
+        raise ToolError(f'--transmission: {mech.name} names no mechanism.joint_space (the '
+                        'joints a controller commands, one per degree of freedom): add it '
+                        'under mechanism: to plot the map between them and the motors '
+                        '(docs/transmission.md)', EXIT_USAGE)
 
 
 def _picture_warning(mech):

@@ -19,7 +19,7 @@ import numpy as np
 from ..core import joints
 from ..core import kinematics as kin
 from ..core import spatial as sp
-from . import figure_text, idle_spin_marks
+from . import figure_text, idle_spin_marks, joint_space_marks
 
 #: axes closer to parallel (or perpendicular) than this (sine or cosine) count as such
 PLANAR_TOLERANCE = 1e-6
@@ -273,10 +273,12 @@ def mechanism_figure(mech, q, snapshots=(), title=None, subtitle=None, warning=N
     _draw_cogs(view, pose, colors)
     _draw_joints(view, pose)
     idle_spin_marks.draw(view, pose, mech)
+    joint_space_marks.draw(view, pose, mech)
     labels = _label(view, mech, pose, colors)
     view.finish([pose.all_points()] + [g.all_points() for _, g in ghosts]
                 + [pose.base_points])
-    handles = _legend_handles(mech, pose, ghosts) + idle_spin_marks.legend(mech)
+    handles = (_legend_handles(mech, pose, ghosts) + idle_spin_marks.legend(mech)
+               + joint_space_marks.legend(mech))
     fig.legend(handles=handles, loc='outside lower center', ncols=3, fontsize=8)
     loops = len(mech.model.loops)
     heading = title or (f"{mech.name}: {mech.dof} DOF, {len(mech.links)} links, {loops} "
@@ -351,7 +353,7 @@ def _legend_handles(mech, pose, ghosts):
         Line2D([], [], color='black', lw=0, marker='o', markerfacecolor='white',
                markersize=8, label='passive joint'),
         Line2D([], [], color='black', lw=0, marker='o', markerfacecolor=ACTIVE_COLOR,
-               markersize=9, label='active joint'),
+               markersize=9, label=joint_space_marks.active_label(mech)),
         Line2D([], [], color=CLOSING_COLOR, lw=0, marker='o', markerfacecolor='none',
                markeredgewidth=2.5, markersize=14, label='loop-closing joint'),
         Line2D([], [], color='#4c72b0', lw=0, marker='o', markeredgecolor='black',
