@@ -22,13 +22,14 @@ if TYPE_CHECKING:   # what __getattr__ below gives, for type checkers and linter
         SetpointError,
         Simulation,
         SingularConfigurationError,
+        Transmission,
     )
     from .description import Mechanism
 
 __version__ = '0.1.0'
 __all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',
            'InverseDynamics', 'Mechanism', 'MechanismConfigError', 'SetpointError',
-           'Simulation', 'SingularConfigurationError', '__version__']
+           'Simulation', 'SingularConfigurationError', 'Transmission', '__version__']
 
 #: the names of __all__ the core gives (Mechanism is the description's: it reads files too)
 _FROM_CORE = frozenset(__all__) - {'Mechanism', '__version__'}
