@@ -7,24 +7,50 @@ the spawned process pickled). Every parameter of the table is an attribute by it
 the node's constructor.
 """
 import dataclasses
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..core import MechanismConfigError
 from .parameters import NODE_PARAMETERS, NodeParameter
+
+#: per-joint parameters of the motors (the rest are per commanded joint)
+ACTUATOR_PARAMETERS = ('effort_limits',)
+
+
+def commanded_joints(mechanism: Any, command_space: Any) -> list[str]:
+    """The joints setpoints and measured states name: the motors, or with
+    ``command_space`` 'joint' mechanism.joint_space (MechanismConfigError naming both
+    parameters when the mechanism names none)."""
+    if command_space != 'joint':
+        return list(mechanism.active_joints)
+    if not getattr(mechanism, 'joint_space', None):
+        raise MechanismConfigError(
+            'command_space', f"is 'joint' but mechanism '{mechanism.name}' names no "
+                             'mechanism.joint_space (the joints a controller commands, e.g. '
+                             "the ankle's pitch and roll): give mechanism.joint_space, or "
+                             'command_space: actuator (setpoints naming the motors)')
+    return list(mechanism.joint_space)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class NodeConfig:
     """The node's configuration: ``values`` holds every parameter of NODE_PARAMETERS as
-    checked (per-joint ones as arrays in ``active_joints`` order), read as attributes."""
+    checked (per-joint ones as arrays in ``active_joints`` order, ``effort_limits`` in
+    ``actuators`` order), read as attributes."""
 
     #: the mechanism's parameters (``Mechanism.from_parameters`` builds it again from them)
     mechanism: dict[str, Any]
+    #: the commanded joints, the one place their names come from: what setpoints,
+    #: trajectories and measured states name (the streams' selectors, unwrap, steps, gains):
+    #: mechanism.active_joints, or mechanism.joint_space with ``command_space: joint``
     active_joints: tuple[str, ...]
-    #: per active joint: taken as the 2 pi equivalent nearest the previous position
+    #: per commanded joint: taken as the 2 pi equivalent nearest the previous position
     unwrap: list[bool]
     values: dict[str, Any]
+    #: the motors (mechanism.active_joints), the efforts' order (effort_command,
+    #: joint_effort, effort_limits); () : the same as active_joints
+    actuators: tuple[str, ...] = ()
 
     @classmethod
     def declare(cls, node: Any, overrides: dict[str, Any], mechanism: Any,
@@ -37,18 +63,29 @@ class NodeConfig:
         default of effort_limits; the node's parameter, when given, wins. In a feedback
         control_mode, joint_states_decimation is 0 unless given.
         """
-        active_types = [mechanism.joint_types[mechanism.joints.index(j)]
-                        for j in mechanism.active_joints]
+        commanded = commanded_joints(mechanism, overrides.get('command_space', 'actuator')
+                                     if 'command_space' in table else 'actuator')
+
+        def types(joint_names: Sequence[str]) -> list[str]:
+            return [mechanism.joint_types[mechanism.joints.index(j)] for j in joint_names]
+
         limits = getattr(mechanism, 'effort_limits', None)
         defaults: dict[str, Any] = {'effort_limits': list(limits) if limits else None}
         if overrides.get('control_mode', 'feedforward') != 'feedforward':
             defaults['joint_states_decimation'] = 0     # the robot publishes joint_states
-        values = node.declare_table(table, overrides, active_types, defaults)
-        wraps = [kind.wraps for kind in mechanism.active_kinds]
+        # effort_limits are the motors'; every other per-joint parameter the commanded joints'
+        by_motor = {name: p for name, p in table.items() if name in ACTUATOR_PARAMETERS}
+        values = node.declare_table(by_motor, overrides, types(mechanism.active_joints),
+                                    defaults)
+        values.update(node.declare_table(
+            {name: p for name, p in table.items() if name not in by_motor}, overrides,
+            types(commanded), defaults))
+        values = {name: values[name] for name in table}     # the table's order
+        wraps = [mechanism.joint_specs[mechanism.joint_index[j]].kind.wraps for j in commanded]
         return cls(mechanism=mechanism.settled_parameters(),
-                   active_joints=tuple(mechanism.active_joints),
+                   active_joints=tuple(commanded),
                    unwrap=[values.get('unwrap_angles', False) and w for w in wraps],
-                   values=values)
+                   values=values, actuators=tuple(mechanism.active_joints))
 
     def __getattr__(self, name: str) -> Any:
         # only what the dataclass does not hold itself; __dict__, not self.values: unpickling
@@ -70,6 +107,17 @@ class NodeConfig:
         return self.values['control_mode'] != 'feedforward'
 
     @property
+    def motors(self) -> tuple[str, ...]:
+        """The motors, in effort order (``actuators``; active_joints when not given)."""
+        return self.actuators or self.active_joints
+
+    @property
+    def joint_space(self) -> bool:
+        """Whether setpoints and measured states name mechanism.joint_space
+        (``command_space: joint``)."""
+        return self.values.get('command_space', 'actuator') == 'joint'
+
+    @property
     def limited(self) -> bool:
         """Whether any active joint has a finite effort limit."""
         return bool(np.isfinite(self.values['effort_limits']).any())
@@ -77,13 +125,15 @@ class NodeConfig:
 
 def start_up_summary(mechanism: Any, config: NodeConfig) -> str:
     """The node's start-up log line: the mechanism, its limits, the timeout."""
-    limits = ', '.join(f'{j} {lim:g}' for j, lim in zip(config.active_joints,
+    limits = ', '.join(f'{j} {lim:g}' for j, lim in zip(config.motors,
                                                          config.effort_limits))
     return (f"mechanism '{mechanism.name}': {len(mechanism.links)} links, "
             f"{len(mechanism.joints)} joints, {mechanism.dof} DOF, base link "
             f"'{mechanism.base_link}' held fixed, active joints "
-            f"{', '.join(config.active_joints)}{' (redundant)' if mechanism.is_redundant else ''}"
-            f'; effort limits: {limits}; setpoint timeout {config.setpoint_timeout:g} s '
+            f"{', '.join(config.motors)}{' (redundant)' if mechanism.is_redundant else ''}"
+            + (f"; setpoints in joint space: {', '.join(config.active_joints)}"
+               if config.joint_space else '')
+            + f'; effort limits: {limits}; setpoint timeout {config.setpoint_timeout:g} s '
             f'({config.timeout_behavior})'
             + (f'; {len(mechanism.spherical_chains)} chains of three revolute joints through '
                f'massless links solved as spherical joints' if mechanism.spherical_chains

@@ -318,15 +318,12 @@ def solve_trajectory_message(raw: bytes, solver: 'InverseDynamics', selector: Jo
             raise Rejected('too_long', f'{points} points, more than max_trajectory_points '
                                        f'({max_points})')
         _, q, qd, qdd = trajectory_arrays(msg, selector, unwrap, max_step)
-        solver.reset()
-        # solved at the unwrapped positions (the same poses, and the solver's continuation
-        # from point to point never crosses a wrap); answered with the positions received
-        result = solver.evaluate(unwrapped_columns(q, unwrap), qd, qdd, on_invalid='skip')
-        if not result.valid.all():
-            k = int(np.flatnonzero(~result.valid)[0])
-            bad = rejection(result.errors[k])
-            raise Rejected(bad.reason, f'point {k}: {bad}')
-        tau = np.array(result.torques, dtype=float)
+        if in_joint_space(solver, selector):
+            q, qd, qdd, tau = _joint_space_trajectory(solver, unwrapped_columns(q, unwrap),
+                                                      qd, qdd)
+            names = list(solver.mechanism.active_joints)
+        else:
+            tau, names = _trajectory_torques(solver, q, qd, qdd, unwrap), selector.active_joints
         if not np.isfinite(tau).all():
             k = int(np.argwhere(~np.isfinite(tau))[0][0])
             raise Rejected('out_of_range', f'point {k}: the torques are not finite')
@@ -334,8 +331,53 @@ def solve_trajectory_message(raw: bytes, solver: 'InverseDynamics', selector: Jo
         exc.points = points
         raise
     clipped = effort_limits is not None and clip_efforts(tau, np.asarray(effort_limits, float))
-    out = effort_trajectory(msg, selector.active_joints, q, qd, qdd, tau)
+    out = effort_trajectory(msg, names, q, qd, qdd, tau)
     return serialize_message(out), clipped, points
+
+
+def _trajectory_torques(solver: 'InverseDynamics', q: np.ndarray, qd: np.ndarray,
+                        qdd: np.ndarray, unwrap: Sequence[bool] | None) -> np.ndarray:
+    """The motors' efforts (N, M) of a trajectory of the motors; raises Rejected."""
+    solver.reset()
+    # solved at the unwrapped positions (the same poses, and the solver's continuation
+    # from point to point never crosses a wrap); answered with the positions received
+    result = solver.evaluate(unwrapped_columns(q, unwrap), qd, qdd, on_invalid='skip')
+    if not result.valid.all():
+        k = int(np.flatnonzero(~result.valid)[0])
+        bad = rejection(result.errors[k])
+        raise Rejected(bad.reason, f'point {k}: {bad}')
+    return np.array(result.torques, dtype=float)
+
+
+def in_joint_space(solver: Any, selector: JointSelector) -> bool:
+    """Whether the trajectory names the mechanism's joint space, not its motors (the node
+    with ``command_space: joint`` hands its trajectory process a selector of those)."""
+    mechanism = solver.mechanism
+    space = list(getattr(mechanism, 'joint_space', None) or ())
+    return bool(space) and selector.active_joints == space \
+        and space != list(mechanism.active_joints)
+
+
+def _joint_space_trajectory(solver: 'InverseDynamics', q: np.ndarray, qd: np.ndarray,
+                            qdd: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A joint-space trajectory (N, D) carried to the motors: (motor positions, motor
+    velocities, no accelerations (N, 0), motor efforts), the efforts those of
+    ``InverseDynamics.torques(q, qd, qdd, space='joint')``; raises Rejected naming the point."""
+    from ..core import CogIdError
+    transmission = solver.transmission
+    for each in (transmission.joints, transmission.actuators):
+        each.reset()
+    try:
+        tau = np.asarray(solver.torques(q, qd, qdd, space='joint'), dtype=float)
+        theta = transmission.to_actuator_space(q)
+        theta_dot = transmission.actuator_velocities(q, qd)
+    except CogIdError as exc:
+        bad = rejection(exc)
+        sample = getattr(exc, 'sample', None)
+        raise Rejected(bad.reason, str(bad) if sample is None else f'point {sample}: {bad}'
+                       ) from None
+    return theta, theta_dot, np.zeros((len(q), 0)), tau
 
 
 def effort_trajectory(msg: JointTrajectory, active_joints: Sequence[str], q: np.ndarray,

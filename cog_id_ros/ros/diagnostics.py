@@ -323,7 +323,7 @@ class Report:
             status.message = (f'{publishers} publishers feed measured_joint_states, more than '
                               f'max_measured_publishers ({most}): not commanded from')
         values = [('mechanism', node.mechanism.name),
-                  ('active_joints', ', '.join(node.config.active_joints)),
+                  ('active_joints', ', '.join(node.config.motors)),
                   ('backend', node.solver.backend),
                   *self._counted(),
                   ('nodes_with_this_name', same_name_nodes),

@@ -50,6 +50,7 @@ from .diagnostics import (
     guarded,
 )
 from .feedback import FeedbackMode
+from .joint_space_solver import JointSpaceSolver
 from .measurement_stream import MeasurementStream
 from .modes import Mode, make_mode
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
@@ -119,12 +120,11 @@ class CogIdNode(ReadOnlyNode):
         trajectory worker, timers (a managed node: at configure; cleanup releases them)."""
         config = self.config
         with interruptible():
-            self.solver = InverseDynamics(self.mechanism, backend=config.backend)  # setpoints
-            self.report = Report(self, InverseDynamics(self.mechanism, backend=config.backend))
+            self.solver = self._new_solver()        # setpoints
+            self.report = Report(self, self._new_solver())
             # setpoint -> efforts; a feedback mode: measured state -> efforts too (a solver
             # of its own: the measured stream's branch continuity)
-            self.mode: Mode = make_mode(config, self.solver, lambda: InverseDynamics(
-                self.mechanism, backend=config.backend))
+            self.mode: Mode = make_mode(config, self.solver, self._new_solver)
         # joint_setpoint is served by a thread of its own, trajectories are answered by the
         # trajectory worker's, everything else by the executor: what they share is under it
         self.lock = threading.Lock()
@@ -136,7 +136,7 @@ class CogIdNode(ReadOnlyNode):
             config, self.mode.needs_velocities,
             lambda: self.counts.matched['measured_joint_states']) if self.mode.measured else None
         self.effort_limits = config.effort_limits if config.limited else None  # None: no clip
-        self.outputs = EffortMessages(config.active_joints, self.mechanism.joints)
+        self.outputs = EffortMessages(config.motors, self.mechanism.joints)
         self._joint_states_countdown = 1      # served setpoints until the next joint_states
         with self.qos_overrides_honoured(overrides):
             self._create_topics()
@@ -161,6 +161,12 @@ class CogIdNode(ReadOnlyNode):
             self.get_logger().warning(f'mechanism: {warning}')
         for warning in self.mode.gain_warnings() if self.mode.measured else ():
             self.get_logger().warning(warning)
+
+    def _new_solver(self) -> Any:
+        """A solver of the commanded joints: InverseDynamics, or its joint-space twin
+        (``command_space: joint``: motor efforts of a joint-space motion)."""
+        make = JointSpaceSolver if self.config.joint_space else InverseDynamics
+        return make(self.mechanism, backend=self.config.backend)
 
     def _create_topics(self) -> None:
         qos_options = QoSOverridingOptions.with_default_policies
@@ -294,10 +300,18 @@ class CogIdNode(ReadOnlyNode):
             counts.reject(bad.reason, str(bad))
             return
         efforts = self._send(efforts, start)
-        self.effort_pub.publish(self.outputs.state_for(msg.header, stream.received, v, efforts))
+        self.effort_pub.publish(self.outputs.state_for(
+            msg.header, *self._motor_state(stream.received, v, self.solver), efforts))
         stream.accept()
         if self.joint_states_pub is not None:       # last: nothing waits for it
             self._joint_states_due(msg.header.frame_id, stream.stamp, v, self.solver)
+
+    def _motor_state(self, positions: list[float], rates: list[float],
+                     solver: Any) -> tuple[list[float], list[float]]:
+        """joint_effort's positions and velocities: the motors' (at ``solver``'s pose)."""
+        if self.config.joint_space:
+            return solver.actuator_state(rates)
+        return positions, rates
 
     def _joint_states_due(self, frame_id: str, stamp: int, rates: list[float],
                           solver: Any) -> None:
@@ -358,7 +372,8 @@ class CogIdNode(ReadOnlyNode):
             counts.reject_measurement(bad.reason, of_measured_state(str(bad)))
             return
         efforts = self._send(efforts, start)
-        self.effort_pub.publish(self.outputs.state_for(msg.header, q, v, efforts))
+        self.effort_pub.publish(self.outputs.state_for(
+            msg.header, *self._motor_state(q, v, mode.measured_solver), efforts))
         stream.accept()
         counts.measured(mode.error)
         if self.joint_states_pub is not None:       # when given: the measured pose, closed
@@ -508,7 +523,7 @@ class CogIdNode(ReadOnlyNode):
         if config.timeout_behavior == 'none':
             return 'nothing published'
         if config.timeout_behavior == 'zero':
-            efforts = [0.0] * len(config.active_joints)
+            efforts = [0.0] * len(config.motors)
             what = 'zero efforts published'
         else:
             if pose is None:
@@ -527,9 +542,10 @@ class CogIdNode(ReadOnlyNode):
         return what
 
     def _initial_active_positions(self) -> list[float]:
-        """The active joints' assembled initial_positions (hold before any pose)."""
+        """The commanded joints' assembled initial_positions (hold before any pose)."""
         m = self.mechanism
-        return [float(m.assembled_positions[m.joints.index(j)]) for j in m.active_joints]
+        return [float(m.assembled_positions[m.joints.index(j)])
+                for j in self.config.active_joints]
 
     # --- trajectories ------------------------------------------------------------------------
 

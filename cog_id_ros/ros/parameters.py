@@ -37,6 +37,8 @@ TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
 
 #: control_mode: feed-forward (setpoints alone) and the feedback modes (measured states too)
 CONTROL_MODES = ('feedforward', 'computed_torque', 'pd_feedforward', 'gravity_compensation')
+#: command_space: what setpoints, trajectories and measured states name (efforts: the motors)
+COMMAND_SPACES = ('actuator', 'joint')
 #: default largest move of an active joint between two measured states (rad, m): 200 rad/s
 #: or 20 m/s at 1 kHz, far beyond a physical robot's, far below an encoder glitch's turn
 MEASUREMENT_MAX_STEP = {'rad': 0.2, 'm': 0.02}
@@ -343,6 +345,15 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     '`pd_feedforward`, `gravity_compensation` the measured state on '
                     '`measured_joint_states` too, one command per measured state with the '
                     'latest setpoint in force. Read-only: switching modes needs a restart'),
+    NodeParameter(
+        'command_space', 'string', 'actuator', 'choice', choices=COMMAND_SPACES,
+        description='what setpoints, trajectories and measured states name: `actuator` the '
+                    'motors (`mechanism.active_joints`); `joint` the joints of '
+                    '`mechanism.joint_space` (e.g. ankle pitch and roll), carried to the '
+                    "motors exactly (`Transmission`); efforts are always the motors'. With "
+                    '`joint`, the per-joint parameters other than `effort_limits` are per '
+                    'joint of the joint space. A mechanism without `mechanism.joint_space` is '
+                    'refused'),
     NodeParameter(
         'kp', 'double[]', 100.0, 'gains', unit='1/s²',
         description='`computed_torque`: position gain on the acceleration, '

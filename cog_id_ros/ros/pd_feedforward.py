@@ -28,6 +28,8 @@ class PdFeedForward(FeedbackMode):
         self.kp = [float(k) for k in config.pd_kp]
         self.kd = [float(k) for k in config.pd_kd]
         self.redundant = measured_solver.mechanism.is_redundant
+        #: command_space joint: the pd efforts are the joint space's, carried to the motors
+        self.to_motors = getattr(measured_solver, 'actuator_efforts', None)
 
     def law(self, q_m: list[float], qd_m: list[float], setpoint: Setpoint | None,
             error: list[float], rate_error: list[float]) -> list[float]:
@@ -37,6 +39,8 @@ class PdFeedForward(FeedbackMode):
         pd = [kp * e + kd * de for kp, e, kd, de in zip(self.kp, error, self.kd, rate_error)]
         if self.redundant:      # on the independent coordinates, distributed as eq. (7)
             pd = (self.active_rate_map().T @ np.array(pd)).tolist()
+        elif self.to_motors is not None:    # joint-space efforts: the motors' share, J^T pd
+            pd = self.to_motors(pd).tolist()
         return [ff + p for ff, p in zip(setpoint[3], pd)]
 
     def gain_warnings(self) -> list[str]:
