@@ -32,6 +32,7 @@ setup(
         'console_scripts': [
             'cog_id_node = cog_id_ros.ros.main:main',
             'cog_sim_node = cog_id_ros.ros.sim_main:main',
+            'cog_transmission_node = cog_id_ros.ros.main:transmission_main',
             'cog_id_torques = cog_id_ros.offline.cli:main',
             'cog_id_player = cog_id_ros.ros.player:main',
             'cog_id_demo = cog_id_ros.demos.table:main',

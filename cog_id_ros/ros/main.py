@@ -133,5 +133,34 @@ def node_main(args: list[str] | None, program: str, usage: str,
     return run(name, functools.partial(node_class, command_line=argv), args)
 
 
+#: cog_transmission_node's console script (setup.py; transmission_node.NODE_NAME)
+TRANSMISSION_PROGRAM = 'cog_transmission_node'
+
+TRANSMISSION_USAGE = f"""usage: {TRANSMISSION_PROGRAM} [-h] --ros-args --params-file FILE [-p NAME:=VALUE ...] [-r OLD:=NEW ...]
+
+The map between a mechanism's joint space (mechanism.joint_space, e.g. an ankle's pitch and
+roll) and its motors (mechanism.active_joints), at message rate: joint_command
+(sensor_msgs/JointState in joint space: positions, velocities, efforts) in, actuator_command
+(the motors) out; actuator_states (the motors' measured state) in, joint_states (every
+joint) out; counts on /diagnostics. The parameters: cog_id_node's parameter file, e.g.
+
+    {TRANSMISSION_PROGRAM} --ros-args --params-file config/parallel_ankle.yaml
+
+A parameter that cannot be honoured ends the node with exit status 2 and one line naming
+it. Ctrl-C or SIGTERM stop it (exit status 0). Documentation: docs/node.md.
+"""  # noqa: E501 (the usage line as printed)
+
+
+def transmission_main(args: list[str] | None = None) -> int:
+    """cog_transmission_node's console script: as :func:`main`, for the map alone."""
+    return console_main(lambda argv: node_main(argv, TRANSMISSION_PROGRAM, TRANSMISSION_USAGE,
+                                               _cog_transmission_node), args)
+
+
+def _cog_transmission_node() -> tuple[str, Callable[..., Any]]:
+    from .transmission_node import NODE_NAME, CogTransmissionNode
+    return NODE_NAME, CogTransmissionNode
+
+
 if __name__ == '__main__':
     sys.exit(main())

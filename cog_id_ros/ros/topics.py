@@ -113,6 +113,29 @@ FEEDBACK_TOPICS: dict[str, Topic] = {t.name: t for t in (
 )}
 
 
+#: cog_transmission_node's topics (docs/node.md, "Joint space (command_space) and
+#: cog_transmission_node")
+TRANSMISSION_TOPICS: dict[str, Topic] = {t.name: t for t in (
+    Topic('joint_command', 'sensor_msgs/JointState', 'in', STREAM,
+          'joint-space command: names include every joint of `mechanism.joint_space` (any '
+          'order, extra names ignored); any of positions, velocities, efforts, positions '
+          'required when velocities or efforts are given (the map needs the pose)'),
+    Topic('actuator_command', 'sensor_msgs/JointState', 'out', _CONTROL,
+          'one per accepted joint_command: its header, `mechanism.active_joints`, each field '
+          'it carried mapped (`to_actuator_space`, `actuator_velocities`, `actuator_efforts`)'),
+    Topic('actuator_states', 'sensor_msgs/JointState', 'in', STREAM,
+          "the motors' measured state: names include every active joint; positions "
+          'required, velocities and efforts optional'),
+    Topic('joint_states', 'sensor_msgs/JointState', 'out', _CONTROL,
+          'one per accepted actuator_states: every joint of `mechanism.joints` (the joint '
+          'space and every passive joint solved), velocities `S thetadot`, efforts '
+          '`joint_efforts` on the joint space (the measured one on a motor outside it, 0 '
+          'on a passive joint)'),
+    Topic('/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'out', 'diagnostics',
+          'once a `diagnostics_period`: counts per input and reason'),
+)}
+
+
 def qos_text(topic: Topic) -> str:
     if topic.qos == _CONTROL:
         return f'reliable, keep-last {CONTROL_QOS_DEPTH}, volatile (overridable)'
