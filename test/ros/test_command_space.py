@@ -97,6 +97,10 @@ def test_ankle_setpoints_in_joint_space_get_the_apis_motor_efforts(nodes, mechan
     for q, v in (([0.0, 0.0], [0.0, 0.0]), ([0.3, -0.2], [0.5, 1.0]),
                  ([-0.4, 0.25], [-1.0, 0.3])):
         check_served(probes['ankle'], mechanisms['ankle'], q, v)
+    status = values(probes['ankle'].status_after(time.monotonic()))
+    assert status['active_joints'] == 'motor_left, motor_right'
+    assert status['internal_errors'] == '0'
+    assert float(status['last_closure_residual']) < 1e-9     # of the last joint-space pose
 
 
 def test_joint_states_carry_every_joint_of_the_served_pose(nodes, mechanisms, rclpy_context):
