@@ -216,3 +216,41 @@ def test_a_mechanism_without_joint_space_is_refused_naming_both(ros_env):
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1, result.stderr
     assert 'command_space' in lines[0] and 'mechanism.joint_space' in lines[0]
+
+
+@pytest.mark.parametrize('mode', ['computed_torque', 'pd_feedforward', 'gravity_compensation'])
+def test_feedback_laws_in_joint_space_are_the_apis(mechanisms, mode):
+    """Each feedback law with the joint-space solver (no ROS): computed_torque the motors'
+    efforts of the commanded joint-space acceleration; pd_feedforward the setpoint's motor
+    efforts plus J^T of the joint-space pd efforts at the measured pose;
+    gravity_compensation the motors' efforts at rest at the measured pose."""
+    from types import SimpleNamespace
+
+    from cog_id_ros.ros.joint_space_solver import JointSpaceSolver
+    from cog_id_ros.ros.modes import make_mode
+    from cog_id_ros.ros.parameters import NODE_PARAMETERS
+    mech = mechanisms['ankle']
+    given = {'control_mode': mode, 'command_space': 'joint', 'kp': [50.0], 'kd': [10.0],
+             'pd_kp': [30.0, 40.0], 'pd_kd': [2.0, 3.0]}
+    kinds = ['revolute', 'revolute']
+    config = SimpleNamespace(active_joints=tuple(mech.joint_space), unwrap=[True, True],
+                             joint_space=True,
+                             **{n: p.check(given.get(n, p.default), kinds)
+                                for n, p in NODE_PARAMETERS.items()})
+    law = make_mode(config, JointSpaceSolver(mech), lambda: JointSpaceSolver(mech))
+    q_d, qd_d, qdd_d = [0.2, -0.1], [0.3, 0.1], [1.0, -2.0]
+    q_m, qd_m = [0.18, -0.08], [0.25, 0.2]
+    law.efforts(q_d, qd_d, qdd_d)
+    got = np.array(law.command(q_m, qd_m))
+    api = cog_id_ros.InverseDynamics(mech)
+    e, de = np.subtract(q_d, q_m), np.subtract(qd_d, qd_m)
+    if mode == 'computed_torque':
+        expected = api.torques(q_m, qd_m, np.add(qdd_d, 10.0 * de + 50.0 * e), space='joint')
+    elif mode == 'pd_feedforward':
+        tr = api.transmission
+        pd = np.array([30.0, 40.0]) * e + np.array([2.0, 3.0]) * de
+        expected = api.torques(q_d, qd_d, qdd_d, space='joint') + \
+            tr.actuator_efforts(tr.to_actuator_space(q_m), pd)
+    else:
+        expected = api.torques(q_m, [0.0, 0.0], [0.0, 0.0], space='joint')
+    np.testing.assert_allclose(got, expected, rtol=0, atol=TOL)
