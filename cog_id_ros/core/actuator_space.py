@@ -204,6 +204,34 @@ class ActuatorSpaceSolver:
             raise out_of_range(rates_in, [], None)
         return positions.tolist(), qdot.tolist()
 
+    def closed_pose(self, q: Sequence[float], with_rates: bool = False
+                    ) -> Tuple[List[float], Optional[np.ndarray]]:
+        """One sample at control rate: (every joint's position, mechanism.joints order; with
+        ``with_rates`` the joint-rate map S (n_joints, M) there, else None) at the closed
+        pose of the M actuator positions ``q``. The same numbers as :meth:`solve_positions`
+        and :meth:`joint_rate_map` of one sample, through the lean sample path (no second
+        evaluation of the pose); the warm start moves there."""
+        m = self.mechanism
+        target, _, _, single = setpoints(m, self._serial.wrapping, q, None, None,
+                                         self.check_position_limits)
+        if not single:
+            raise SetpointError(f'closed_pose takes one sample (one number per active '
+                                f'joint), got shape {np.shape(q)}')
+        _, state = self._serial.solve(self._state, target)
+        coordinates, n = state[0], len(m.joints)
+        chains = m.spherical_chains          # (joints read back from the pose: the kernel)
+        positions = m.joints_at(coordinates)[0].tolist() if chains else list(coordinates[:n])
+        s = None
+        if with_rates:
+            solved = active_velocity_map(self._solved, state[1], sp.ScalarOps)
+            s = np.column_stack([m.joints_at(coordinates, [row[k] for row in solved])[1]
+                                 for k in range(len(target))]) if chains else \
+                np.array(solved[:n], dtype=float)
+            if not np.isfinite(s).all():
+                raise out_of_range(list(target), [], None)
+        self._state = state
+        return positions, s
+
     def joint_rate_map(self, q: ArrayLike) -> np.ndarray:
         """S (n_joints, M), qdot = S thetadot, at the closed pose of ``q`` (M actuator
         positions): every joint's rate (mechanism.joints order) per actuator rate; (N,

@@ -164,6 +164,9 @@ def test_batches_follow_the_per_sample_rule(ankle):
     assert np.allclose(theta, [one.to_actuator_space(row) for row in q], rtol=0, atol=1e-13)
     assert np.allclose(tr.to_joint_space(theta), q, atol=1e-9, rtol=0)
     assert tr.jacobian(theta).shape == (40, 2, 2)
+    tau = np.column_stack([np.sin(np.arange(40.0)), np.cos(np.arange(40.0))])
+    assert np.allclose(tr.joint_efforts(theta, tau),
+                       [one.joint_efforts(a, b) for a, b in zip(theta, tau)], rtol=1e-9)
     assert np.allclose(tr.actuator_velocities(q, qd),
                        [one.actuator_velocities(a, b) for a, b in zip(q, qd)], rtol=1e-12)
     batch = InverseDynamics(ankle).torques(q, qd, np.zeros_like(q), space='joint')
@@ -217,6 +220,11 @@ def test_a_singular_transmission_is_refused_naming_the_joints(knee):
     assert refused is not None and 0.6 < q < 0.7714
     assert 'motor_knee' in str(refused) and '(knee)' in str(refused)
     assert refused.condition_number > 1e3
+    # the motor's efforts on the knee (K^T tau_m) where the motor's crank toggles: J -> 0
+    with pytest.raises(SingularConfigurationError) as err:
+        for theta in np.linspace(1.62, 1.63, 201):
+            assert np.isfinite(tr.joint_efforts([theta], [1.0])).all()
+    assert 'motor_knee' in str(err.value) and err.value.condition_number > 1e3
 
 
 @pytest.mark.parametrize('joint_space, words', [

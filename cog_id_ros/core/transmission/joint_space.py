@@ -3,11 +3,13 @@
 A joint space is a set of revolute or prismatic joints of the mechanism (passive or active),
 as many as it has degrees of freedom, whose rates determine its motion: held, nothing moves.
 At the assembled pose the motions the loops allow (with the locked joints held) form a basis
-V; the joint space's rows of V must be square and invertible (condition number within
+V (orthonormal); the joint space's rows of V must be square and see every motion
+(:func:`seen_condition`, 1 / their least singular value, within
 mechanism.max_condition_number). Otherwise the error names ``mechanism.joint_space`` and
 what is wrong: the free motion left (the joints that still move with the joint space held)
 or the joints of the joint space whose rates the loops tie to each other.
 """
+import math
 from typing import Any
 
 import numpy as np
@@ -15,9 +17,6 @@ import numpy as np
 from ..errors import MechanismConfigError
 
 PARAMETER = 'mechanism.joint_space'
-#: a singular value of the joint space's rows of the (orthonormal) motion basis below this:
-#: a motion the joint space does not see
-UNSEEN = 1e-9
 
 
 def read_joint_space(mech: Any, reader: Any) -> list[str]:
@@ -48,8 +47,8 @@ def check_joint_space(mech: Any, equations: np.ndarray) -> None:
     basis = _motions(equations, mech.n_coordinates, mech.dof)   # (n, dof)
     rows = basis[[mech.joint_index[name] for name in names]]  # (dof, dof)
     u, s, vt = np.linalg.svd(rows)
-    # (the basis is orthonormal: a joint space that sees the motion has s of order 1)
-    if s[-1] > max(s[0] / mech.max_condition_number, UNSEEN):
+    condition = seen_condition(rows)
+    if condition <= mech.max_condition_number:
         return
     moving = basis @ vt[-1]
     scale = np.abs(moving).max()
@@ -58,11 +57,20 @@ def check_joint_space(mech: Any, equations: np.ndarray) -> None:
     tied = [name for name, c in zip(names, u[:, -1]) if abs(c) > 1e-6]
     raise MechanismConfigError(
         PARAMETER, f"does not determine the motion at the assembled pose (condition number "
-                   f"{s[0] / max(s[-1], 1e-300):.3g}): with {', '.join(names)} held, "
+                   f"{condition:.3g}): with {', '.join(names)} held, "
                    + (f"{', '.join(still)} can still move" if still else 'a motion is left')
                    + f"; the rates of {', '.join(tied)} are tied to each other by the loops. "
                    'Name joints whose rates are independent (the knee, the ankle pitch and '
                    'roll, ...), or move initial_positions away from a singular pose')
+
+
+def seen_condition(rows: np.ndarray) -> float:
+    """How badly the joint space sees the motion: 1 / the least singular value of its rows
+    (D, D) of an orthonormal basis of the motions (>= 1; inf where it misses one). Each
+    row's norm is at most 1, so this bounds their condition number too, and for one joint
+    it is the share of the motion that joint's rate carries, inverted."""
+    least = np.linalg.svd(rows, compute_uv=False)[-1]
+    return 1.0 / least if least > 0.0 else math.inf
 
 
 def _motions(equations: np.ndarray, n: int, dof: int) -> np.ndarray:

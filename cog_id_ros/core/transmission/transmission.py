@@ -25,14 +25,14 @@ it finds its loops singular (mechanism.max_condition_number) and the error names
 sets. Every call keeps each solver's assembly branch (warm starts), a batch follows the
 per-sample rule.
 """
-from typing import Any, Literal, Optional
+from typing import Any, Literal, Optional, cast
 
 import numpy as np
 
 from ..actuator_space import ActuatorSpaceSolver, ArrayLike
 from ..errors import MechanismConfigError, SetpointError, SingularConfigurationError
 from ..mechanism import Mechanism
-from .joint_space import PARAMETER
+from .joint_space import PARAMETER, seen_condition
 
 
 def joint_space_parameters(mechanism: Any) -> dict:
@@ -81,12 +81,16 @@ class Transmission:
     def to_joint_space(self, theta: ArrayLike) -> np.ndarray:
         """q (D,) or (N, D) of the motors' positions theta (M,) or (N, M)."""
         with self._named():
+            if _one(theta):
+                return _rows(self.actuators.closed_pose(_floats(theta))[0], self._q)
             return self.actuators.solve_positions(theta)[..., self._q]
 
     def to_actuator_space(self, q: ArrayLike) -> np.ndarray:
         """theta (M,) or (N, M) of the joint-space positions q (D,) or (N, D): the
         consistent motor positions (every motor, a redundant one too)."""
         with self._named():
+            if _one(q):
+                return _rows(self.joints.closed_pose(_floats(q))[0], self._theta)
             return self.joints.solve_positions(q)[..., self._theta]
 
     # --- velocities -----------------------------------------------------------------------
@@ -94,11 +98,15 @@ class Transmission:
     def jacobian(self, theta: ArrayLike) -> np.ndarray:
         """J = dq/dtheta (D, M) at theta, or (N, D, M)."""
         with self._named():
+            if _one(theta):
+                return _rate_map(self.actuators, theta)[self._q]
             return self.actuators.joint_rate_map(theta)[..., self._q, :]
 
     def inverse_jacobian(self, q: ArrayLike) -> np.ndarray:
         """K = dtheta/dq (M, D) at the joint-space position q, or (N, M, D)."""
         with self._named():
+            if _one(q):
+                return _rate_map(self.joints, q)[self._theta]
             return self.joints.joint_rate_map(q)[..., self._theta, :]
 
     def joint_velocities(self, theta: ArrayLike, theta_dot: ArrayLike) -> np.ndarray:
@@ -119,9 +127,26 @@ class Transmission:
 
     def joint_efforts(self, theta: ArrayLike, tau_m: ArrayLike) -> np.ndarray:
         """tau_q = K^T tau_m (D,) or (N, D): the joint-space efforts the motors' efforts make
-        at theta (the linkage massless)."""
-        k = self.inverse_jacobian(self.to_joint_space(theta))
+        at theta (the linkage massless). One sample: K from the motion at theta alone
+        (:meth:`_inverse_at`); N samples: from the joints' solver at each q."""
+        if _one(theta):
+            with self._named():
+                k = self._inverse_at(_rate_map(self.actuators, theta))
+        else:
+            k = self.inverse_jacobian(self.to_joint_space(theta))
         return _apply(np.swapaxes(k, -1, -2), tau_m)
+
+    def _inverse_at(self, s: np.ndarray) -> np.ndarray:
+        """K = dtheta/dq (M, D) from the joint-rate map S (n_joints, M) of one pose: an
+        orthonormal basis U of the motions (S's range: D columns) gives K = U_a U_q^-1;
+        refused as singular where the joint space sees too little of the motion
+        (:func:`.joint_space.seen_condition`, as mechanism.joint_space is checked at load)."""
+        u = np.linalg.svd(s, full_matrices=False)[0][:, :len(self._q)]
+        u_q = u[self._q]
+        condition = seen_condition(u_q)
+        if not condition <= self.mechanism.max_condition_number:
+            raise self._singular(SingularConfigurationError('singular', condition))
+        return u[self._theta] @ np.linalg.inv(u_q)
 
     # --- dynamics in joint space ----------------------------------------------------------
 
@@ -177,6 +202,25 @@ class _NamedSingular:
         if isinstance(exc, SingularConfigurationError) and 'transmission' not in str(exc):
             raise self.transmission._singular(exc) from exc
         return False
+
+
+def _one(x: ArrayLike) -> bool:
+    """Whether ``x`` is one sample: a number or a flat sequence."""
+    return np.ndim(x) <= 1
+
+
+def _floats(x: ArrayLike) -> Any:
+    """One sample as the lean sample path takes it: a list of floats (a number stays one)."""
+    return x.tolist() if isinstance(x, np.ndarray) else x
+
+
+def _rows(values: list, index: list) -> np.ndarray:
+    return np.array([values[j] for j in index])
+
+
+def _rate_map(solver: ActuatorSpaceSolver, x: ArrayLike) -> np.ndarray:
+    """S (n_joints, M) of one sample by the lean sample path."""
+    return cast(np.ndarray, solver.closed_pose(_floats(x), with_rates=True)[1])
 
 
 def _apply(matrices: np.ndarray, vectors: ArrayLike) -> np.ndarray:
