@@ -8,7 +8,7 @@ adds joint space to it), a thin face over the modules that do the work.
 
 Successive calls keep the assembly branch: each is warm-started from the previous one.
 """
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 
@@ -224,7 +224,8 @@ class ActuatorSpaceSolver:
         s = None
         if with_rates:
             solved = active_velocity_map(self._solved, state[1], sp.ScalarOps)
-            s = np.column_stack([m.joints_at(coordinates, [row[k] for row in solved])[1]
+            s = np.column_stack([cast(np.ndarray, m.joints_at(coordinates,
+                                                             [row[k] for row in solved])[1])
                                  for k in range(len(target))]) if chains else \
                 np.array(solved[:n], dtype=float)
             if not np.isfinite(s).all():
