@@ -237,7 +237,9 @@ def test_a_bad_message_gets_no_output_and_a_counted_reason(nodes, mechanisms, ca
 def test_it_survives_a_flood_and_answers_afterwards(nodes, mechanisms):
     procs, probes = nodes
     probe, mech = probes['ankle'], mechanisms['ankle']
-    for k in range(3000):
+    # 10x the subscription's depth in a burst (no more: the suite's other nodes share the
+    # machine, and a longer flood starves their 1 kHz streams)
+    for k in range(1000):
         probe.send('joint_command', mech.joint_space, [0.001 * (k % 100), 0.0],
                    [0.1, 0.0], [1.0, 1.0])
         if k % 2:
