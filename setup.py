@@ -14,8 +14,8 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'bench']),
-    # the C every compiled kernel module starts with (core/emitter.py reads it)
-    package_data={PACKAGE + '.core': ['kernels_prelude.c', 'kernels_simulation.c']},
+    # the C every compiled kernel module starts with (core/native/emitter.py reads it)
+    package_data={PACKAGE + '.core.native': ['kernels_prelude.c', 'kernels_simulation.c']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),

@@ -35,8 +35,8 @@ from mechanisms import from_yaml  # noqa: E402
 from spin_models import delta_3rss  # noqa: E402
 
 import cog_id_ros  # noqa: E402
-from cog_id_ros.core import kernels, native, native_build  # noqa: E402
-from cog_id_ros.core.native_cache import library_paths  # noqa: E402
+from cog_id_ros.core.native import kernels, native, native_build  # noqa: E402
+from cog_id_ros.core.native.native_cache import library_paths  # noqa: E402
 
 
 def foreground():

@@ -42,7 +42,7 @@ from peer import OraclePeer, Peer  # noqa: E402
 from trajectories import NOT_FOR_ORACLE, TRAJECTORIES, TWINS  # noqa: E402
 
 import cog_id_ros  # noqa: E402
-from cog_id_ros.core import native  # noqa: E402
+from cog_id_ros.core.native import native  # noqa: E402
 
 BLOCK = 500
 RTOL = 1e-8

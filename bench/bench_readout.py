@@ -1,11 +1,11 @@
-"""Speed of the read-out of the joints as written (core/joint_readout.py), beside a torque sample.
+"""Speed of the read-out of the joints as written (core/kinematics/joint_readout.py), beside a torque sample.
 
     .venv/bin/python bench/bench_readout.py             (every config in config/ with chains)
     .venv/bin/python bench/bench_readout.py --robots    (and the published robots of test/models)
     .venv/bin/python bench/bench_readout.py stewart_6ups delta_3rus
 
 A mechanism whose chains of three revolute joints are solved as spherical joints
-(core/spherical_chains.py) shows the joints as written through ``Mechanism.joints_at``, which
+(core/kinematics/spherical_chains.py) shows the joints as written through ``Mechanism.joints_at``, which
 ``InverseDynamics.last_pose`` (the node's joint_states) and ``Simulation.joint_positions``
 and ``joint_velocities`` call. Along 400 samples of bench_core.motion at 1 kHz (the solver
 form's coordinates and rates closed by the native kernels), medians in us per call,
@@ -37,14 +37,14 @@ sys.path.insert(0, HERE)
 from bench_core import motion  # noqa: E402
 
 import cog_id_ros  # noqa: E402
-from cog_id_ros.core import kernels  # noqa: E402
-from cog_id_ros.core import kinematics as kin  # noqa: E402
-from cog_id_ros.core import spatial as sp  # noqa: E402
-from cog_id_ros.core.assembly import AssemblyWarning  # noqa: E402
-from cog_id_ros.core.inputs import rates as rates_of  # noqa: E402
-from cog_id_ros.core.joint_motion import active_velocity_map, combine  # noqa: E402
-from cog_id_ros.core.joint_readout import chain_angles, chain_rates, chain_turn  # noqa: E402
-from cog_id_ros.core.sample_solve import SampleSolver  # noqa: E402
+from cog_id_ros.core.closure.joint_motion import active_velocity_map, combine  # noqa: E402
+from cog_id_ros.core.kinematics import kinematics as kin  # noqa: E402
+from cog_id_ros.core.kinematics.joint_readout import chain_angles, chain_rates, chain_turn  # noqa: E402
+from cog_id_ros.core.linalg import spatial as sp  # noqa: E402
+from cog_id_ros.core.model.assembly import AssemblyWarning  # noqa: E402
+from cog_id_ros.core.native import kernels  # noqa: E402
+from cog_id_ros.core.solve.inputs import rates as rates_of  # noqa: E402
+from cog_id_ros.core.solve.sample_solve import SampleSolver  # noqa: E402
 
 CONFIGS = ('stewart_6ups', 'delta_3rus', 'spatial_rsur', 'talos_like_leg')
 ROBOTS = ('wl16_like', 'cassie_like', 'digit_like', 'talos_like')

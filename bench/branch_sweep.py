@@ -41,7 +41,7 @@ REPO = os.path.dirname(HERE)
 sys.path.insert(0, REPO)
 
 import cog_id_ros  # noqa: E402
-from cog_id_ros.core.continuation import length_scale  # noqa: E402
+from cog_id_ros.core.closure.continuation import length_scale  # noqa: E402
 
 COLLECTION = os.path.join(REPO, 'test', 'models', 'example_parallel_robots')
 #: the published robots that load (untouched, or with idle_spins: lock)

@@ -24,7 +24,7 @@ Each generator also returns the same closed initial pose that its inverse kinema
 Script mode prints, per member: joints, loops, DOF, the coordinates solved for and the traced
 operation counts of ``kernels_for(mech.solver_mechanism, 'python').operations`` (S joints
 written as three revolutes through massless links are solved as spherical joints,
-core/spherical_chains.py) and load and trace times:
+core/kinematics/spherical_chains.py) and load and trace times:
 
     .venv/bin/python bench/mechanism_family.py [--max-joints 80] [--family ups|chain|all]
 """
@@ -554,7 +554,7 @@ def _peak_mb():
 def measure(index, family):
     """Load and trace one member in this (fresh) process; returns a dict of figures."""
     import cog_id_ros
-    from cog_id_ros.core import kernels
+    from cog_id_ros.core.native import kernels
     label, make = members(family)[index]
     params = make()
     rss0 = _peak_mb()
@@ -562,7 +562,7 @@ def measure(index, family):
     mech = cog_id_ros.Mechanism.from_parameters(params)
     t1 = time.perf_counter()
     # the kernels of what is solved: S joints written as three revolutes through massless
-    # links are solved as spherical joints (core/spherical_chains.py)
+    # links are solved as spherical joints (core/kinematics/spherical_chains.py)
     ops = kernels.kernels_for(mech.solver_mechanism, 'python').operations
     t2 = time.perf_counter()
     return dict(label=label, joints=len(mech.joints), loops=len(mech.joints) - len(mech.links),

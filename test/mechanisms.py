@@ -4,7 +4,7 @@ import math
 
 import yaml
 
-from cog_id_ros.core.parameters import flatten
+from cog_id_ros.core.kinematics.parameters import flatten
 
 ROD = [0.0, 0.020833333333333332, 0.020833333333333332, 0.0, 0.0, 0.0]
 

@@ -5,7 +5,7 @@ What counts as a reference (what these texts spell; anything else is prose):
 
 * a dotted name that starts with ``cog_id_ros.`` (``cog_id_ros.ros.stop_signals``,
   ``cog_id_ros.core.errors.REASONS``), anywhere: imported and looked up;
-* a path to a Python file (``core/batch.py``, ``cog_id_ros/ros/node.py``, ``pipeline.py``):
+* a path to a Python file (``core/solve/batch.py``, ``cog_id_ros/ros/node.py``, ``pipeline.py``):
   beside the text, in the package or in the repository (a bare file name anywhere there);
 * in a docstring, a role (``:func:`name```, ``:meth:`Class.name```, ``:mod:`...```): looked
   up in the module, the class it is written in, or as an absolute name;

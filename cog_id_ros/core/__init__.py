@@ -11,11 +11,22 @@ joint rates), kinematics.py (tree, poses, twists), joints.py (each kind of joint
 them), spatial.py / lane_linalg.py (algebra). mechanism.py reads a mechanism; assembly.py
 and degrees_of_freedom.py analyse it at load.
 Who runs them: sample_solve.py (one sample: continuation, Newton, checks) calling the
-kernels of kernels.py; batch.py (N samples on arrays); inverse_dynamics.py (the solver
-users call, InverseDynamics); inputs.py (what it accepts); forward_solve.py (forward
-dynamics of one sample or N); simulation.py (Simulation: RK4 on the independent
-coordinates, the loops closed at every stage).
+kernels of kernels.py; batch.py (N samples on arrays); actuator_space.py (the solver of
+actuator space); inputs.py (what it accepts); forward_solve.py (forward dynamics of one
+sample or N); transmission.py (joint space: the map between the joints a controller
+commands and the motors); inverse_dynamics.py (the solver users call, InverseDynamics, in
+either space); simulation.py (Simulation: RK4 on the independent coordinates, the loops
+closed at every stage).
+
+The modules are in concept folders, each importing only those before it: linalg/
+(spatial algebra, lanes), kinematics/ (tree, joints, parameters), closure/ (loop
+equations, Newton, continuation, joint rates), model/ (mechanism, assembly, its joint
+space checked), dynamics/ (COG Jacobians, Newton-Euler, pipeline.py, forward dynamics),
+native/ (kernels and their backends), solve/ (the solvers of actuator space),
+transmission/ (joint space and actuator space), simulation/, api/ (InverseDynamics).
+errors.py and value_types.py stay here, below them all.
 """
+from .api.inverse_dynamics import Evaluation, InverseDynamics
 from .errors import (
     REASONS,
     ClosureError,
@@ -24,9 +35,8 @@ from .errors import (
     SetpointError,
     SingularConfigurationError,
 )
-from .inverse_dynamics import Evaluation, InverseDynamics
-from .mechanism import AssemblyWarning, Mechanism
-from .simulation import Simulation
+from .model.mechanism import AssemblyWarning, Mechanism
+from .simulation.simulation import Simulation
 from .transmission.transmission import Transmission
 
 __all__ = ['REASONS', 'AssemblyWarning', 'ClosureError', 'CogIdError', 'Evaluation',

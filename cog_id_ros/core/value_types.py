@@ -20,7 +20,7 @@ Twist = tuple[Vec3, Vec3]            # (w, v0): Pluecker, base frame
 Transform = tuple[Rotation, Vec3]    # (R, t)
 # spatial.ScalarOps, spatial.ArrayOps or straight_line.SymOps: the lane functions of a kind
 Ops = Any
-# a core.mechanism.Mechanism, named so in the modules mechanism.py itself imports (a typing
+# a core.model.mechanism.Mechanism, named so in the modules mechanism.py itself imports (a typing
 # import back would be an import cycle)
 MechanismLike = Any
 # a small matrix of lanes as the lane code holds it: a list of rows

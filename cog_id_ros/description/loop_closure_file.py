@@ -31,7 +31,7 @@ import numpy as np
 import yaml
 
 from ..core.errors import MechanismConfigError
-from ..core.parameters import show
+from ..core.kinematics.parameters import show
 from . import yaml_guard
 from .frames import ZERO
 from .loop_closures import Closure

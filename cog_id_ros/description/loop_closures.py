@@ -3,11 +3,11 @@
 type, the links it joins, where it sits on each and its axes."""
 import math
 
-from ..core import joints
 from ..core.errors import MechanismConfigError
-from ..core.joints import AXES_PERPENDICULAR
-from ..core.mechanism import MAX_COORDINATE, MAX_LENGTH, bounded, name_problem
-from ..core.parameters import show, split_owner
+from ..core.kinematics import joints
+from ..core.kinematics.joints import AXES_PERPENDICULAR
+from ..core.kinematics.parameters import show, split_owner
+from ..core.model.mechanism import MAX_COORDINATE, MAX_LENGTH, bounded, name_problem
 from .frames import ZERO
 
 #: the keys of ``loop_closures.<name>.*``

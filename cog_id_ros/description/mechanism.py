@@ -1,6 +1,6 @@
 """``cog_id_ros.Mechanism``: the core's Mechanism, made from what users write.
 
-The core's Mechanism (:mod:`cog_id_ros.core.mechanism`) is made from the native dotted
+The core's Mechanism (:mod:`cog_id_ros.core.model.mechanism`) is made from the native dotted
 parameters and knows no file format. This module adds the two ways users make one
 (docs/parameter_file.md, docs/mechanism.md, docs/urdf.md):
 :meth:`Mechanism.from_params_file` (a ROS 2 parameter file, :mod:`.params_file`) and
@@ -21,9 +21,9 @@ Mechanisms: nothing reads them from a file.
 """
 import os
 
-from ..core import mechanism as core
 from ..core.errors import MechanismConfigError
-from ..core.parameters import ParameterReader
+from ..core.kinematics.parameters import ParameterReader
+from ..core.model import mechanism as core
 from . import urdf
 from .params_file import DEFAULT_NODE_NAME, load_params_file
 from .urdf_messages import for_urdf_user

@@ -29,7 +29,7 @@ import stat
 import yaml
 
 from ..core.errors import MechanismConfigError
-from ..core.parameters import flatten, show
+from ..core.kinematics.parameters import flatten, show
 from . import yaml_guard
 from .urdf_xml import MAX_URDF_SIZE
 

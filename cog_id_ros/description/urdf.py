@@ -19,7 +19,7 @@ theorem, in the frame of the link that survives); every joint, closure and base 
 refers to a merged link is re-expressed in the survivor's frame. ``continuous`` joints are
 revolute joints without position limits; ``floating`` and ``planar`` joints (more than one
 coordinate) are refused naming the joint; ``<mimic>`` couples a joint to another
-(core/couplings.py: ``joints.<name>.mimic``, ``mimic_multiplier``, ``mimic_offset``).
+(core/kinematics/couplings.py: ``joints.<name>.mimic``, ``mimic_multiplier``, ``mimic_offset``).
 ``<dynamics>``, ``<safety_controller>``, ``<calibration>``, ``<visual>``, ``<collision>``,
 ``<transmission>``, ``<gazebo>`` and ``<material>`` are ignored.
 
@@ -27,10 +27,10 @@ Every error is a MechanismConfigError naming the parameter (``robot_description`
 ``mechanism.urdf_file``, ``loop_closures.<name>.<key>``, ``mechanism.active_joints``, ...);
 errors inside the URDF give its line and name the link or joint.
 """
-from ..core import joints
 from ..core.errors import MechanismConfigError
-from ..core.mechanism import name_problem
-from ..core.parameters import ParameterReader, as_float, show
+from ..core.kinematics import joints
+from ..core.kinematics.parameters import ParameterReader, as_float, show
+from ..core.model.mechanism import name_problem
 from .frames import ZERO
 from .loop_closure_file import PARAMETER as LOOP_FILE
 from .loop_closure_file import apply_edits, file_closures, read_loop_file
@@ -158,7 +158,7 @@ def _native(r, robot, closures, base, bodies, loop_file):
     _active(r, robot, closures, loop_file, out)
     given = _initial_positions(r, robot, closures, coordinates)
     out['mechanism.initial_positions'] = [given.get(name, 0.0) for name in coordinates]
-    # the joints left out: their positions are found by the assembly (core/assembly.py)
+    # the joints left out: their positions are found by the assembly (core/model/assembly.py)
     out['mechanism.found_at_assembly'] = [name for name in coordinates if name not in given]
     for name in links:
         mass, com, inertia = mass_properties(bodies, name)

@@ -9,10 +9,10 @@ there; anything it does not recognise passes unchanged.
 """
 import re
 
-from ..core import joints
-from ..core.assembly import POSE_MARK, PoseRefused, mapping_block
 from ..core.errors import MechanismConfigError
-from ..core.parameters import split_owner
+from ..core.kinematics import joints
+from ..core.kinematics.parameters import split_owner
+from ..core.model.assembly import POSE_MARK, PoseRefused, mapping_block
 
 #: native advice -> the same advice for the URDF form (patterns, in the core's words)
 _ADVICE = (

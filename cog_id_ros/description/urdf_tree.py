@@ -1,16 +1,22 @@
 """The links and joints of a URDF, read from its elements and checked to form one tree.
 
 Every number is read as urdfdom reads it and bounded as the native schema bounds what it
-becomes (core/mechanism.py), at its element, so that an error names the line it is on.
+becomes (core/model/mechanism.py), at its element, so that an error names the line it is on.
 """
 import math
 import re
 
 import numpy as np
 
-from ..core import joints
-from ..core.mechanism import MAX_COORDINATE, MAX_INERTIA, MAX_LENGTH, MAX_MASS, inertia_problem
-from ..core.parameters import show
+from ..core.kinematics import joints
+from ..core.kinematics.parameters import show
+from ..core.model.mechanism import (
+    MAX_COORDINATE,
+    MAX_INERTIA,
+    MAX_LENGTH,
+    MAX_MASS,
+    inertia_problem,
+)
 from .frames import ZERO, rpy_matrix
 from .rigid_bodies import six
 from .urdf_xml import parse_xml

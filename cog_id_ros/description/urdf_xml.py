@@ -23,7 +23,7 @@ import stat
 from xml.parsers import expat
 
 from ..core.errors import MechanismConfigError
-from ..core.parameters import show
+from ..core.kinematics.parameters import show
 
 #: largest URDF read (characters or bytes); a mechanism within the core's size limits takes
 #: far less, even with its visual and collision elements

@@ -23,7 +23,7 @@ import time as _time
 
 import numpy as np
 
-from ..core.kernels import BACKENDS
+from ..core.native.kernels import BACKENDS
 from . import (
     derivatives,
     joint_space_solving,

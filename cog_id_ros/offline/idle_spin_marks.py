@@ -1,6 +1,6 @@
 """What ``cog_id_inspect --plot`` adds to the picture for idle spins and locked joints.
 
-A set of links that spins idly about its own axis (core/idle_spins.py: a rod between two
+A set of links that spins idly about its own axis (core/model/idle_spins.py: a rod between two
 balls, two halves welded into one rod, a body between coaxial joints) is drawn with a
 dashed magenta line along its axis, through the joints it hangs on; each locked joint
 (``mechanism.locked_joints``, or the one ``idle_spins: lock`` chose) with a dark cross on its

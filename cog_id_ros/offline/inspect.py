@@ -196,7 +196,7 @@ def load(args):
     ``idle_spins: lock`` to show them (the refusal is returned, and the exit status is
     still 2). The loader's AssemblyWarnings are not printed as Python warnings: the report
     shows them (``assembly_warnings``)."""
-    from ..core.mechanism import AssemblyWarning
+    from ..core.model.mechanism import AssemblyWarning
     if not os.path.isfile(args.params_file):
         what = 'no such file' if not os.path.exists(args.params_file) else 'not a regular file'
         raise ToolError(f'--params-file {args.params_file}: {what}', EXIT_USAGE)

@@ -118,7 +118,7 @@ def format_joint_table(mech):
 def pose_block(mech):
     """The assembled pose as an initial_positions entry to paste: a mapping for the URDF
     form (whose reader names the joints it left to the assembly), else a list."""
-    from ..core import assembly
+    from ..core.model import assembly
     pose = assembly.pose_block(mech, mech.assembled_positions)
     if 'mechanism.found_at_assembly' in mech.parameters:
         return assembly.mapping_block(pose)
@@ -135,7 +135,7 @@ def _signed(value):
 
 
 def _far_text(mech):
-    from ..core import assembly
+    from ..core.model import assembly
     text = f'threshold {assembly.FAR_ANGLE:g} rad'
     lengths = [j for j in range(len(mech.joints)) if mech.far_move_limit(j)[1] == 'm']
     if lengths:

@@ -10,7 +10,7 @@ WIDTH = 99
 
 
 def _link_name(mech, link):
-    from ..core.kinematics import BASE
+    from ..core.kinematics.kinematics import BASE
     return mech.base_link if link == BASE else mech.links[link]
 
 
@@ -86,7 +86,7 @@ def format_structure(mech):
     between them) and the loops (closing joint, and the cycle of tree joints), as lines.
 
     One function for both, so that new kinds of joints show up in one place."""
-    from ..core.kinematics import BASE
+    from ..core.kinematics.kinematics import BASE
     model = mech.model
     kinds = _joint_kinds(mech)
     declared = _declared(mech)
@@ -135,7 +135,7 @@ def format_structure(mech):
 
 def _up_path(hops, link):
     """[(joint, link above)] from ``link`` up to the base link."""
-    from ..core.kinematics import BASE
+    from ..core.kinematics.kinematics import BASE
     path = []
     while link != BASE:
         parent, name = hops[link]
@@ -163,7 +163,8 @@ def _cycle_text(mech, loop, hops):
 
 def format_spherical_chains(mech):
     """What the solver takes as spherical joints: chains of three revolute joints through
-    two massless links (core/spherical_chains.py), and the coordinates that leaves it."""
+    two massless links (core/kinematics/spherical_chains.py), and the coordinates that leaves
+    it."""
     chains = mech.spherical_chains
     if not chains:
         return []

@@ -16,9 +16,9 @@ pyplot, no display, no global backend switch.
 
 import numpy as np
 
-from ..core import joints
-from ..core import kinematics as kin
-from ..core import spatial as sp
+from ..core.kinematics import joints
+from ..core.kinematics import kinematics as kin
+from ..core.linalg import spatial as sp
 from . import figure_text, idle_spin_marks, joint_space_marks
 
 #: axes closer to parallel (or perpendicular) than this (sine or cosine) count as such
@@ -90,7 +90,7 @@ class Pose:
     frames (a :class:`kinematics.Frames`, e.g. :func:`frames_from_cog_poses`).
 
     ``joints``: per joint (with a coordinate, then the spherical, universal and fixed ones)
-    a dict with name, kind (its kind object, core/joints.py: how it is drawn), active,
+    a dict with name, kind (its kind object, core/kinematics/joints.py: how it is drawn), active,
     closing, parent_point, child_point, axes (world unit vectors). ``links``: per moving
     link (name, attachment points (k, 3), cog (3,), mass); the solver's own massless links
     (the cross of a universal joint in the tree) are not

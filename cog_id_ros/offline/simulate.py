@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
-from ..core.kernels import BACKENDS
-from ..core.mechanism import Mechanism
+from ..core.model.mechanism import Mechanism
+from ..core.native.kernels import BACKENDS
 from . import atomic_files, outputs
 from .console import (
     EXIT_BROKEN_PIPE,
@@ -53,7 +53,7 @@ from .stop_signals import Interrupted, StopSignals
 from .trajectory_io import TIME, Trajectory, joint_column
 
 if TYPE_CHECKING:
-    from ..core.simulation import Simulation
+    from ..core.simulation.simulation import Simulation
 
 TRACEBACK_ENV = 'COG_ID_SIMULATE_TRACEBACK'
 DEFAULT_TIME_STEP = 0.001

@@ -17,7 +17,7 @@ from typing import Sequence, TextIO
 
 import numpy as np
 
-from ..core.mechanism import Mechanism
+from ..core.model.mechanism import Mechanism
 from . import samples, trajectory_io
 from .console import EXIT_INPUT, EXIT_USAGE, ToolError, output_target
 from .trajectory_io import EFFORT, Trajectory, TrajectoryError, joint_column

@@ -434,7 +434,7 @@ class EffortMessages:
         return pose
 
 
-#: the core's advice for a setpoint it cannot reach (core/sample_solve.py), and what it
+#: the core's advice for a setpoint it cannot reach (core/solve/sample_solve.py), and what it
 #: means for a measured state: the robot does not move in such steps, its encoders jump
 UNREACHABLE_ADVICE = ('. Send setpoints closer together (the solver follows the assembly '
                       'branch in short steps)')

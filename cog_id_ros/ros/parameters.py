@@ -17,8 +17,9 @@ import math
 import sys
 from typing import Any, Callable, NoReturn, Sequence
 
-from ..core import MechanismConfigError, joints
-from ..core.kernels import BACKENDS
+from ..core import MechanismConfigError
+from ..core.kinematics import joints
+from ..core.native.kernels import BACKENDS
 from ..offline.jumps import DEFAULT_MAX_STEP
 
 #: parameter prefixes that describe the mechanism (handed to Mechanism.from_parameters):

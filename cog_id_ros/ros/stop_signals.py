@@ -32,7 +32,7 @@ Parts of start-up that build no rclpy object but may take long (loading the mech
 compiling its kernels: a hung compiler may take minutes) run inside
 :meth:`DeferredStop.interruptible`: there a stop signal, or one noted before, raises
 :class:`StopRequested` at once, and the code unwinds (a compiler it started is killed on
-the way, core/native_build.py)::
+the way, core/native/native_build.py)::
 
     with stop.interruptible():
         mechanism = Mechanism.from_parameters(...)    # StopRequested on Ctrl-C

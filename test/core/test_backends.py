@@ -13,8 +13,8 @@ import pytest
 from trajectories import TRAJECTORIES, config_path, sample
 
 import cog_id_ros
-from cog_id_ros.core.emitter import python_function, python_source
-from cog_id_ros.core.kernels import (
+from cog_id_ros.core.native.emitter import python_function, python_source
+from cog_id_ros.core.native.kernels import (
     BACKENDS,
     ClosureRecord,
     PoseRecord,
@@ -22,8 +22,8 @@ from cog_id_ros.core.kernels import (
     ReferenceKernels,
     kernels_for,
 )
-from cog_id_ros.core.sample_solve import SampleSolver
-from cog_id_ros.core.straight_line import Graph, SymOps
+from cog_id_ros.core.native.straight_line import Graph, SymOps
+from cog_id_ros.core.solve.sample_solve import SampleSolver
 
 MECHANISMS = {name: cog_id_ros.Mechanism.from_params_file(config_path(name))
               for name in TRAJECTORIES}
@@ -172,7 +172,7 @@ def test_backend_is_a_public_switch():
 
 
 def test_auto_leaves_large_mechanisms_to_the_reference_kernels(monkeypatch):
-    import cog_id_ros.core.kernels as kernels
+    import cog_id_ros.core.native.kernels as kernels
     mechanism = cog_id_ros.Mechanism.from_parameters(from_yaml('config/slider_crank.yaml'))
     monkeypatch.setattr(kernels, 'TRACE_BUDGET', len(mechanism.links) * 1 - 1)
     assert cog_id_ros.InverseDynamics(mechanism).backend == 'reference'

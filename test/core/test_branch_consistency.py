@@ -33,7 +33,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core.continuation import length_scale
+from cog_id_ros.core.closure.continuation import length_scale
 
 hypothesis = pytest.importorskip('hypothesis')
 from hypothesis import HealthCheck, example, given, settings  # noqa: E402

@@ -259,7 +259,7 @@ def wrist_motion(n=150):
     mech = twin.mechanism
     ball = [mech.joints.index(j) for j in ('ball_x', 'ball_y', 'ball_z')]
     legs = [mech.joints.index(f'p{i}') for i in range(3)]
-    from cog_id_ros.core import closure
+    from cog_id_ros.core.closure import closure
     lengths = []
     q = list(mech.assembled_coordinates)
     for a in angles:
@@ -309,7 +309,8 @@ def test_a_tree_spherical_joint_turns_through_the_helper_links_gimbal_lock(monke
     assert [c.joints for c in helper.spherical_chains] == [('ball_x', 'ball_y', 'ball_z')]
     ball = [helper.joints.index(j) for j in ('ball_x', 'ball_y', 'ball_z')]
     legs = [helper.joints.index(f'p{i}') for i in range(3)]
-    from cog_id_ros.core import closure, spherical_chains
+    from cog_id_ros.core.closure import closure
+    from cog_id_ros.core.kinematics import spherical_chains
     q = list(helper.assembled_coordinates)
     pitches = np.linspace(0.0, 1.7, 171)
     lengths = []
@@ -399,7 +400,7 @@ def test_a_platform_described_turned_round_is_assembled_on_the_same_branch():
 @pytest.mark.parametrize('idle_spins', ['refuse', 'lock'])
 def test_a_link_between_two_ball_joints_is_refused_naming_the_fix(idle_spins):
     """The R-S-U-R coupler with a ball joint at each end spins idly about the line through
-    their centres (core/idle_spins.py): refused at load, naming the link, its two spherical
+    their centres (core/model/idle_spins.py): refused at load, naming the link, its two spherical
     joints and the fix (one of them universal), not 'add active joints' (spherical joints
     cannot be); with idle_spins: lock too, as nothing there can be locked."""
     p = rsur_both()

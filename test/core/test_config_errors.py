@@ -398,7 +398,7 @@ def test_a_missing_child_xyz_is_reported_with_the_joints_that_moved():
     """Reliability item 24: without joint4's child_xyz the loop only closes far from
     initial_positions; the load says so (assembly_warnings and an AssemblyWarning), with
     both values and the loop's joints to check."""
-    from cog_id_ros.core.mechanism import AssemblyWarning
+    from cog_id_ros.core.model.mechanism import AssemblyWarning
     params = with_changes(from_yaml(PAPER_A), joints__joint4__child_xyz=None)
     with pytest.warns(AssemblyWarning) as record:
         mech = cog_id_ros.Mechanism.from_parameters(params)
@@ -429,7 +429,7 @@ def test_an_actuator_the_assembly_had_to_move_is_refused():
 def test_a_slightly_moved_redundant_actuator_is_noted():
     """Reliability item 24: rounded redundant initial positions still load, but the move of
     the actuators (within setpoint_tolerance) is noted with both values."""
-    from cog_id_ros.core.mechanism import AssemblyWarning
+    from cog_id_ros.core.model.mechanism import AssemblyWarning
     rounded = with_changes(from_yaml('config/paper_four_bar_b.yaml'),
                            mechanism__initial_positions=[1.5708, -1.5708, 1.5707, 1.5708])
     with pytest.warns(AssemblyWarning, match='within mechanism.setpoint_tolerance'):
@@ -443,7 +443,7 @@ def test_the_example_mechanisms_load_without_assembly_notes():
     import glob
     import warnings
 
-    from cog_id_ros.core.mechanism import AssemblyWarning
+    from cog_id_ros.core.model.mechanism import AssemblyWarning
     files = sorted(glob.glob('config/*.yaml'))
     assert len(files) >= 6
     with warnings.catch_warnings():

@@ -11,9 +11,9 @@ import pytest
 import yaml
 
 import cog_id_ros
-from cog_id_ros.core import mechanism as mechanism_module
-from cog_id_ros.core.joints import Revolute
-from cog_id_ros.core.kinematics import BASE, JointSpec, KinematicModel
+from cog_id_ros.core.kinematics.joints import Revolute
+from cog_id_ros.core.kinematics.kinematics import BASE, JointSpec, KinematicModel
+from cog_id_ros.core.model import mechanism as mechanism_module
 
 
 def serial_chain(n, active=None):

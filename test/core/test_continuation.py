@@ -1,4 +1,4 @@
-"""Continuation (core/continuation.py): the solver follows the assembly branch in bounded
+"""Continuation (core/closure/continuation.py): the solver follows the assembly branch in bounded
 work, whatever the setpoint: angles wrap by 2 pi, every joint's step is bounded, and the
 batch path keeps only samples that sample-by-sample continuation would reach."""
 import math

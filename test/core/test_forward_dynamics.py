@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core.forward_dynamics import INERTIA_CONDITION_LIMIT
+from cog_id_ros.core.dynamics.forward_dynamics import INERTIA_CONDITION_LIMIT
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))

@@ -33,7 +33,7 @@ from spin_models import (  # noqa: E402
 from trajectories import sample  # noqa: E402
 
 import cog_id_ros  # noqa: E402
-from cog_id_ros.core.assembly import AssemblyWarning  # noqa: E402
+from cog_id_ros.core.model.assembly import AssemblyWarning  # noqa: E402
 
 pin = pytest.importorskip('pinocchio')
 from pinocchio_reference import Oracle  # noqa: E402

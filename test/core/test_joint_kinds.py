@@ -1,4 +1,4 @@
-"""Joint kinds (core/joints.py): a new kind is one class and its registration.
+"""Joint kinds (core/kinematics/joints.py): a new kind is one class and its registration.
 
 The toy kind of docs/adding_a_joint_kind.md, a helical (screw) joint, is written here as
 that page says, registered, loaded from parameters and solved; its torques are checked
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core import joints
-from cog_id_ros.core import spatial as sp
 from cog_id_ros.core.errors import MechanismConfigError
+from cog_id_ros.core.kinematics import joints
+from cog_id_ros.core.linalg import spatial as sp
 from cog_id_ros.offline import inspect_pose, mechanism_plot
 
 BACKENDS = ('reference', 'python')
@@ -249,7 +249,7 @@ def modules_spelling_kind_names():
 
 def test_kind_names_are_spelled_in_few_modules():
     spelling = modules_spelling_kind_names()
-    assert 'core/joints.py' in spelling
+    assert 'core/kinematics/joints.py' in spelling
     assert len(spelling) <= MAY_SPELL, spelling
 
 

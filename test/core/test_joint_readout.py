@@ -1,4 +1,4 @@
-"""The joints as written read back from the solver form's coordinates (core/joint_readout.py):
+"""The joints as written read back from the solver form's coordinates (core/kinematics/joint_readout.py):
 the same numbers, to the bit, as the straightforward read-out (every frame and twist of
 the solver form, then each chain), whoever computes them: the lane code on floats (no
 solver made), the traced Python read-out, the compiled one; N samples as the lane code on
@@ -16,15 +16,16 @@ import pytest
 from trajectories import config_path, sample
 
 import cog_id_ros
-from cog_id_ros.core import joint_readout, kernels, native
-from cog_id_ros.core import kinematics as kin
-from cog_id_ros.core import spatial as sp
-from cog_id_ros.core.assembly import AssemblyWarning
-from cog_id_ros.core.emitter import c_module_source, python_function
-from cog_id_ros.core.inputs import rates as rates_of
-from cog_id_ros.core.joint_motion import active_velocity_map, combine
-from cog_id_ros.core.sample_solve import SampleSolver
-from cog_id_ros.core.straight_line import Graph, SymOps
+from cog_id_ros.core.closure.joint_motion import active_velocity_map, combine
+from cog_id_ros.core.kinematics import joint_readout
+from cog_id_ros.core.kinematics import kinematics as kin
+from cog_id_ros.core.linalg import spatial as sp
+from cog_id_ros.core.model.assembly import AssemblyWarning
+from cog_id_ros.core.native import kernels, native
+from cog_id_ros.core.native.emitter import c_module_source, python_function
+from cog_id_ros.core.native.straight_line import Graph, SymOps
+from cog_id_ros.core.solve.inputs import rates as rates_of
+from cog_id_ros.core.solve.sample_solve import SampleSolver
 
 ROBOTS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'models',
                       'example_parallel_robots')

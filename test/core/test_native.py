@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core import kernels, native, native_build, native_cache
+from cog_id_ros.core.native import kernels, native, native_build, native_cache
 
 pytestmark = pytest.mark.skipif(native.compiler() is None, reason='no C compiler here')
 

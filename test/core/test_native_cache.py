@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core import kernels, native, native_build
+from cog_id_ros.core.native import kernels, native, native_build
 
 ROOT = Path(__file__).resolve().parents[2]
 OTHER_UID = 65534

@@ -5,7 +5,7 @@ Part A needs no cog_id_ros: closed forms of the paper's parallelogram four-bar, 
 convention of the parameter file written out with numpy, power balance, and finite
 differences of the oracle's own motion.
 Part B compares cog_id_ros with the oracle on every example config along its test motion.
-It is skipped only while cog_id_ros/core/inverse_dynamics.py does not exist; once that file
+It is skipped only while cog_id_ros/core/api/inverse_dynamics.py does not exist; once that file
 exists, an import failure is a test failure.
 """
 import glob
@@ -290,13 +290,13 @@ def test_oracle_handles_loop_closing_active_joint():
 
 # =========================================================================== part B: cog_id_ros
 
-CORE_FILE = os.path.join(REPO, 'cog_id_ros', 'core', 'inverse_dynamics.py')
+CORE_FILE = os.path.join(REPO, 'cog_id_ros', 'core', 'api', 'inverse_dynamics.py')
 
 
 @pytest.fixture(scope='module')
 def cog():
     if not os.path.exists(CORE_FILE):
-        pytest.skip('cog_id_ros core not written yet (no cog_id_ros/core/inverse_dynamics.py)')
+        pytest.skip('cog_id_ros core not written yet (no cog_id_ros/core/api/inverse_dynamics.py)')
     import cog_id_ros  # once the core exists, failing to import it is a failure, not a skip
     assert hasattr(cog_id_ros, 'InverseDynamics') and hasattr(cog_id_ros, 'Mechanism')
     return cog_id_ros

@@ -177,7 +177,7 @@ def test_no_step_that_jumps_is_accepted(time_step):
     joint, and the state stays at the last step. (Issue 11: the step's error control now
     stops it earlier, at the step no substep follows to the tolerance, naming why; the
     refusal of a jump, which was the only guard, is still there behind it.)"""
-    from cog_id_ros.core.simulation import MAX_STEP_MOTION
+    from cog_id_ros.core.simulation.simulation import MAX_STEP_MOTION
     mech = _mechanism('five_bar.yaml')
     sim = cog_id_ros.Simulation(mech, time_step)
     last = sim.joint_positions()

@@ -1,4 +1,4 @@
-"""Issue 11: the Simulation's error control (cog_id_ros/core/simulation_error.py).
+"""Issue 11: the Simulation's error control (cog_id_ros/core/simulation/simulation_error.py).
 
 Each published step carries an error estimate (RK4's stages and the accelerations at its
 end as an embedded pair, plus what the evaluations' rounding near a singular pose may add)
@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core.simulation_error import (
+from cog_id_ros.core.simulation.simulation_error import (
     DEFAULT_TOLERANCE,
     Diagnostics,
     Substep,

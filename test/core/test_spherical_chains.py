@@ -1,5 +1,5 @@
 """Three revolute joints through two massless links, solved as the spherical joint they are
-(cog_id_ros/core/spherical_chains.py): which chains qualify, the same torques, positions
+(cog_id_ros/core/kinematics/spherical_chains.py): which chains qualify, the same torques, positions
 and rates as solving them as written, and the angles read back."""
 import math
 
@@ -9,8 +9,8 @@ from test_closure_joints import rsur, wrist
 from trajectories import config_path, sample
 
 import cog_id_ros
-from cog_id_ros.core import spatial as sp
-from cog_id_ros.core import spherical_chains
+from cog_id_ros.core.kinematics import spherical_chains
+from cog_id_ros.core.linalg import spatial as sp
 from cog_id_ros.description.params_file import load_params_file
 
 BACKENDS = ('reference', 'python', 'native')
@@ -235,7 +235,7 @@ def test_a_mechanism_with_both_kinds_reads_back_its_hidden_coordinates_too(monke
     written = as_written(params, monkeypatch)
     assert len(mech.spherical_chains) == 1 and mech.n_coordinates > len(mech.joints)
     legs = [mech.joints.index(f'p{i}') for i in range(3)]
-    from cog_id_ros.core import closure
+    from cog_id_ros.core.closure import closure
     ball = [mech.joints.index(j) for j in ('ball_x', 'ball_y', 'ball_z')]
     q, lengths = list(mech.assembled_coordinates), []
     for turn in np.linspace(0.0, 0.6, 7):

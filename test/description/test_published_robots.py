@@ -17,7 +17,7 @@ import pytest
 
 import cog_id_ros
 from cog_id_ros import MechanismConfigError
-from cog_id_ros.core.assembly import AssemblyWarning
+from cog_id_ros.core.model.assembly import AssemblyWarning
 
 COLLECTION = os.path.join(REPO, 'test', 'models', 'example_parallel_robots')
 #: robots that load untouched
@@ -147,7 +147,7 @@ def test_the_disney_legs_free_motion_is_pinocchios_too():
     assert 'can still move' in str(info.value)
     from pinocchio_loops import LoopOracle
 
-    from cog_id_ros.core import assembly
+    from cog_id_ros.core.model import assembly
     folder, urdf, loops = files('disney_like')
     probe = {}
     original = assembly.assemble
@@ -253,7 +253,7 @@ def test_every_actuator_moves_from_the_assembled_pose(robot):
     """0.05 rad (a prismatic motor: 5 % of the mechanism's length scale, the solver's) either
     way, the others held, by the per-sample solver: a pose at the edge of the workspace is
     the assembler's fault."""
-    from cog_id_ros.core.continuation import length_scale
+    from cog_id_ros.core.closure.continuation import length_scale
     mech = load(robot) if robot in LOAD else load(robot, idle_spins='lock')
     q0 = np.array([mech.assembled_positions[j] for j in mech.active_index])
     for a, j in enumerate(mech.active_index):

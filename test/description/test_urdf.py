@@ -568,7 +568,7 @@ def test_unknown_joint_type_is_refused():
 
 
 def test_mimic_is_read_as_a_coupling():
-    """<mimic> becomes the native coupling keys (core/couplings.py), with urdfdom's defaults
+    """<mimic> becomes the native coupling keys (core/kinematics/couplings.py), with urdfdom's defaults
     (multiplier 1, offset 0); a leader the URDF does not have is refused on its line."""
     urdf = four_bar_urdf().replace(
         '<axis xyz="0 0 1"/><limit lower="-6" upper="6" effort="0" velocity="1.0"/></joint>',

@@ -3,7 +3,7 @@
 A small exporter (here, test-only) turns a native mechanism into the URDF form of
 docs/urdf.md: the URDF tree is the core's spanning tree (``Mechanism.model.edges``), each
 link's URDF frame is the child-side attachment frame of its tree joint (URDF's child link
-frame IS the joint frame), and every loop-closing joint (``model.loops``) becomes a
+frame IS the joint frame), and every loop-closing joint (``KinematicModel.loops``) becomes a
 ``loop_closures.<name>`` entry. Everything fixed to a link (COG, inertia, the other joints'
 attachments, the closure frames) is re-expressed in the link's new frame; the base keeps its
 frame, so gravity passes unchanged.
@@ -31,9 +31,9 @@ import pytest
 import trajectories
 
 from cog_id_ros import AssemblyWarning, InverseDynamics, Mechanism
-from cog_id_ros.core import kinematics as kin
-from cog_id_ros.core import spatial as sp
-from cog_id_ros.core.kinematics import BASE
+from cog_id_ros.core.kinematics import kinematics as kin
+from cog_id_ros.core.kinematics.kinematics import BASE
+from cog_id_ros.core.linalg import spatial as sp
 from cog_id_ros.description.frames import rpy_matrix, rpy_of
 from cog_id_ros.description.params_file import load_params_file
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import cog_id_ros
-from cog_id_ros.core.kinematics import BASE
+from cog_id_ros.core.kinematics.kinematics import BASE
 from cog_id_ros.offline import inspect as tool
 from cog_id_ros.offline import mechanism_plot
 

@@ -22,7 +22,9 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from trajectories import TRAJECTORIES  # noqa: E402
 
 import cog_id_ros  # noqa: E402
-from cog_id_ros.core import closure, kinematics, spatial  # noqa: E402
+from cog_id_ros.core.closure import closure  # noqa: E402
+from cog_id_ros.core.kinematics import kinematics  # noqa: E402
+from cog_id_ros.core.linalg import spatial  # noqa: E402
 from cog_id_ros.ros.node import control_qos  # noqa: E402
 from cog_id_ros.ros.player import RECORDER_QOS  # noqa: E402
 

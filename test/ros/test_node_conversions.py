@@ -75,7 +75,7 @@ def test_a_core_message_said_of_a_measured_state():
     from conftest import REPO
 
     import cog_id_ros
-    from cog_id_ros.core.sample_solve import unreachable
+    from cog_id_ros.core.solve.sample_solve import unreachable
     from cog_id_ros.ros.conversions import MEASURED_ADVICE, UNREACHABLE_ADVICE, of_measured_state
 
     mech = cog_id_ros.Mechanism.from_params_file(f'{REPO}/config/paper_four_bar_a.yaml')

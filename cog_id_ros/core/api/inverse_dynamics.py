@@ -14,10 +14,10 @@ from typing import Optional
 
 import numpy as np
 
-from .actuator_space import ActuatorSpaceSolver, ArrayLike
-from .batch import Evaluation
-from .errors import SetpointError
-from .transmission.transmission import Transmission
+from ..errors import SetpointError
+from ..solve.actuator_space import ActuatorSpaceSolver, ArrayLike
+from ..solve.batch import Evaluation
+from ..transmission.transmission import Transmission
 
 __all__ = ['ArrayLike', 'Evaluation', 'InverseDynamics']
 

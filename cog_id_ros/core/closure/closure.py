@@ -20,51 +20,15 @@ loop (its cycle through the tree plus the loop joint itself), so A is assembled 
 joint twists of forward_kinematics; its time derivative along the motion, the bias beta
 with A qddot + beta = 0, comes from the acceleration recursion.
 """
-from typing import Any, Iterable, Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
-from . import kinematics as kin
-from . import spatial as sp
-from .lane_linalg import QRLeastSquares
-from .value_types import FloatArray, Lane, LaneMatrix, Lanes, Ops, Twist, Twists
-
-
-class LoopState:
-    """Per loop: closure point x (base frame), residual (6 lanes), and the cosine of the
-    angle between the two attachment frames (a half-turn also zeroes the residual; 1.0
-    where the orientation is free); universal: its two axes a, b (base frame)."""
-    __slots__ = ('x', 'residual', 'cosine', 'a', 'b')
-    x: Any
-    residual: Any
-    cosine: Lane
-    a: Any
-    b: Any
-
-
-class UnitQuaternion:
-    """The closure row of a spherical tree joint's quaternion (its LoopJoint's ``cycle``
-    lists the four coordinates): |q|^2 - 1 = 0, velocity row 2 q . qdot, bias 2 |qdot|^2
-    (d2/dt2 |q|^2 = 2 q . qddot + 2 |qdot|^2); the other five rows zero."""
-
-    closure_equations = 1
-
-    def closure_state(self, lp: kin.LoopJoint, frames: kin.Frames, q: Lanes,
-                      ops: Ops) -> LoopState:
-        st = LoopState()
-        st.x = tuple(q[c] for c, _ in lp.cycle)
-        st.residual = (sum(v * v for v in st.x) - 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        st.cosine = 1.0
-        return st
-
-    def closure_columns(self, lp: kin.LoopJoint, st: LoopState, frames: kin.Frames,
-                        columns: LaneMatrix, row: int) -> None:
-        for (c, _), v in zip(lp.cycle, st.x):
-            columns[c][row] = 2.0 * v
-
-    def closure_bias(self, lp: kin.LoopJoint, st: LoopState, frames: kin.Frames, twists: Twists,
-                     bias_acc: Twists, qdot: Lanes) -> tuple[Lane, ...]:
-        return (2.0 * sum(qdot[c] * qdot[c] for c, _ in lp.cycle), 0.0, 0.0, 0.0, 0.0, 0.0)
+from ..kinematics import kinematics as kin
+from ..kinematics.loop_state import LoopState
+from ..linalg import spatial as sp
+from ..linalg.lane_linalg import QRLeastSquares
+from ..value_types import FloatArray, Lane, Ops, Twist
 
 
 def loop_closure(model: kin.KinematicModel, frames: kin.Frames, q: Sequence[Lane],

@@ -24,8 +24,8 @@ method on the loop equations. The rules, shared by every serial path of the solv
 import math
 from typing import Any, Sequence
 
-from .value_types import Lane
-from .value_types import MechanismLike as Mechanism
+from ..value_types import Lane
+from ..value_types import MechanismLike as Mechanism
 
 #: a pose on its branch: (every coordinate, the velocity basis V there)
 State = tuple[Sequence[Lane], Any]

@@ -18,9 +18,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..linalg.lane_linalg import solve_spd
+from ..value_types import FloatArray, Lane, LaneMatrix, MechanismLike, Ops
 from .closure import ClosureSolution
-from .lane_linalg import solve_spd
-from .value_types import FloatArray, Lane, LaneMatrix, MechanismLike, Ops
 
 Matrix = Sequence[Sequence[Lane]]
 

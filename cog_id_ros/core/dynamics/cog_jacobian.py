@@ -12,9 +12,9 @@ pushing column m of the active-to-joint map S (joint_motion.py) through the tree
 """
 from typing import Sequence
 
-from . import spatial as sp
-from .kinematics import Frames, link_twists
-from .value_types import Lane, MechanismLike, Rotation, Twist, Vec3
+from ..kinematics.kinematics import Frames, link_twists
+from ..linalg import spatial as sp
+from ..value_types import Lane, MechanismLike, Rotation, Twist, Vec3
 
 Cog = tuple[Vec3, Rotation]        # (COG position, link rotation)
 Motion = tuple[Vec3, Vec3]        # (linear, angular): a column of G_i, a velocity, a drift

@@ -27,9 +27,9 @@ singular one: the scale of each coordinate, rad or m, does not matter) is report
 """
 from typing import Any, List, Sequence, Tuple
 
+from ..linalg.lane_linalg import cholesky, cholesky_solve
+from ..model.mechanism import Mechanism
 from .cog_jacobian import cog_drifts, cog_velocities
-from .lane_linalg import cholesky, cholesky_solve
-from .mechanism import Mechanism
 from .pipeline import (
     active_torques,
     cog_jacobians_at,

@@ -6,8 +6,8 @@
 with I_i = R_i I_link R_i^T the inertia about the COG in base-frame axes. Gravity enters
 b as -m g; the gyroscopic term w x I w is the 3-D part of b.
 """
-from . import spatial as sp
-from .value_types import Lane, Rotation, Vec3
+from ..linalg import spatial as sp
+from ..value_types import Lane, Rotation, Vec3
 
 
 def rotated_inertia_times(rot: Rotation, inertia_link: Rotation, vector: Vec3) -> Vec3:

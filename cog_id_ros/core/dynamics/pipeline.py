@@ -19,8 +19,12 @@ spatial.ArrayOps or straight_line.SymOps.
 """
 from typing import Sequence
 
-from . import closure
-from . import spatial as sp
+from ..closure import closure
+from ..closure.joint_motion import active_velocity_map, closure_drift, combine
+from ..kinematics.kinematics import link_bias_accelerations, link_twists
+from ..kinematics.parameters import massless
+from ..linalg import spatial as sp
+from ..value_types import Lane, LaneMatrix, MechanismLike, Ops, Twist, Vec3
 from .cog_jacobian import (
     Cog,
     Motion,
@@ -30,10 +34,7 @@ from .cog_jacobian import (
     cog_poses,
     cog_velocities,
 )
-from .joint_motion import active_velocity_map, closure_drift, combine
-from .kinematics import link_bias_accelerations, link_twists
 from .newton_euler import newton_euler_force, rotated_inertia_times
-from .value_types import Lane, LaneMatrix, MechanismLike, Ops, Twist, Vec3
 
 Pose = closure.ClosureSolution
 Matrix = Sequence[Sequence[Lane]]
@@ -152,7 +153,3 @@ def inertia_matrix(mechanism: MechanismLike, cogs: Sequence[Cog],
         for b in range(a + 1, m):
             h[a][b] = h[b][a]
     return h
-
-
-def massless(mass: float, inertia: Sequence[float]) -> bool:
-    return mass == 0.0 and not any(inertia)

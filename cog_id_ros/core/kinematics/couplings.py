@@ -17,11 +17,11 @@ Native parameters (docs/mechanism.md): ``joints.<follower>.mimic`` names the lea
 """
 from typing import Any
 
+from ..errors import MechanismConfigError
+from ..value_types import Lane, LaneMatrix, Lanes, MechanismLike, Ops, Twists
 from . import kinematics as kin
-from .closure import LoopState
-from .errors import MechanismConfigError
+from .loop_state import LoopState
 from .parameters import ParameterReader
-from .value_types import Lane, LaneMatrix, Lanes, MechanismLike, Ops, Twists
 
 #: the keys a joint with a coordinate reads for its coupling
 KEYS = ('mimic', 'mimic_multiplier', 'mimic_offset')

@@ -23,10 +23,10 @@ import weakref
 
 import numpy as np
 
+from ..linalg import spatial as sp
+from ..linalg.lanes import flat
+from ..value_types import FloatArray, Lane, Lanes, MechanismLike, Ops, Rotation, Vec3
 from . import kinematics as kin
-from . import spatial as sp
-from .lanes import flat
-from .value_types import FloatArray, Lane, Lanes, MechanismLike, Ops, Rotation, Vec3
 
 #: a chain of three revolutes (spherical_chains.SphericalChain: ``axes``, ``reference``,
 #: ``frame_p``, ``frame_c``, ``parent``, ``child``, ``joints``)

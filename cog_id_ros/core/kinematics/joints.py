@@ -28,13 +28,13 @@ too: URDF's 'continuous' is a revolute joint without limits, :attr:`Revolute.ali
 import math
 from typing import Callable, Iterable, Iterator, Sequence
 
+from ..errors import MechanismConfigError
+from ..linalg import spatial as sp
+from ..value_types import Lane, LaneMatrix, Lanes, Ops, Rotation, Transform, Twist, Twists, Vec3
 from . import kinematics as kin
-from . import spatial as sp
-from .closure import LoopState, UnitQuaternion
-from .errors import MechanismConfigError
 from .kinematics import Frames, JointSpec, KinematicModel, LoopJoint, TreeEdge
+from .loop_state import LoopState, UnitQuaternion
 from .parameters import ParameterReader
-from .value_types import Lane, LaneMatrix, Lanes, Ops, Rotation, Transform, Twist, Twists, Vec3
 
 #: how far from perpendicular (cosine) a universal joint's two axes may be written
 AXES_PERPENDICULAR = 1e-6
@@ -207,7 +207,7 @@ class JointKind:
         return lp.d0, lp.t_pj
 
     def closure_state(self, lp: LoopJoint, frames: Frames, q: Lanes, ops: Ops) -> LoopState:
-        """The closure.LoopState of loop ``lp``: closure point x (the child attachment
+        """The loop_state.LoopState of loop ``lp``: closure point x (the child attachment
         origin), residual Phi (6 lanes) and the cosine of the frames' angle."""
         r_moved, t_moved = self.moved_attachment(lp, q, ops)
         r_p, target = kin.to_base(frames, lp.parent, r_moved, t_moved)
@@ -432,7 +432,7 @@ class Spherical(ClosureKind):
     the three position rows x - o = 0. In the tree: A R(q) B with a quaternion q = (w, x,
     y, z) of hidden coordinates, R = R_h(q) / |q|^2, whose rates give the angular velocity
     2 G(q) qdot / |q|^2 (no angle triple, so no gimbal lock anywhere), and the constraint
-    |q|^2 = 1 (closure.UnitQuaternion) that takes up the fourth coordinate."""
+    |q|^2 = 1 (loop_state.UnitQuaternion) that takes up the fourth coordinate."""
 
     name = 'spherical'
     coordinate_type = 'quaternion'

@@ -22,9 +22,9 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from . import spatial as sp
-from .errors import MechanismConfigError
-from .value_types import Lane, Ops, Rotation, Transform, Twist, Vec3
+from ..errors import MechanismConfigError
+from ..linalg import spatial as sp
+from ..value_types import Lane, Ops, Rotation, Transform, Twist, Vec3
 
 BASE = -1
 ZERO3 = (0.0, 0.0, 0.0)

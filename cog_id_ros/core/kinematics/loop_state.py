@@ -3,7 +3,8 @@ joint's quaternion adds (UnitQuaternion): what the kinds of joint write their cl
 from (joints.py), below the closure itself (closure.py).
 """
 from typing import Any
-from .value_types import Lane, LaneMatrix, Lanes, Ops, Twists
+
+from ..value_types import Lane, LaneMatrix, Lanes, Ops, Twists
 from . import kinematics as kin
 
 

@@ -16,9 +16,9 @@ with a bounded ``show`` so that no message can grow without limit.
 """
 import math
 import reprlib
-from typing import Any, Iterable, Iterator, Literal, Mapping, overload
+from typing import Any, Iterable, Iterator, Literal, Mapping, Sequence, overload
 
-from .errors import MechanismConfigError
+from ..errors import MechanismConfigError
 
 #: most parameters a file or dict may expand to (far above any mechanism within the size
 #: limits of mechanism.py); more is refused before anything is built from them
@@ -271,3 +271,7 @@ def split_owner(rest: str, names: list) -> tuple:
     for the longest of ``names`` it starts with (names may hold '.'); (None, rest) if none."""
     owner = max((n for n in names if rest.startswith(n + '.')), key=len, default=None)
     return (owner, rest[len(owner) + 1:]) if owner is not None else (None, rest)
+
+
+def massless(mass: float, inertia: Sequence[float]) -> bool:
+    return mass == 0.0 and not any(inertia)

@@ -45,13 +45,12 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from ..linalg import spatial as sp
+from ..value_types import FloatArray, MechanismLike, Rotation, Vec3
 from . import kinematics as kin
-from . import spatial as sp
 from .joint_readout import JointReadout, chain_angles, chain_rates, chain_turn
 from .joints import Revolute, Spherical
-from .parameters import split_owner
-from .pipeline import massless
-from .value_types import FloatArray, MechanismLike, Rotation, Vec3
+from .parameters import massless, split_owner
 
 #: (with the read-out of the joints as written, joint_readout.py, used from here)
 __all__ = ['JointReadout', 'SphericalChain', 'chain_angles', 'chain_rates', 'chain_turn',

@@ -10,7 +10,7 @@ how close a configuration is to it.
 from operator import mul
 from typing import Sequence
 
-from .value_types import Lane, Ops
+from ..value_types import Lane, Ops
 
 
 def _dot(a: Sequence[Lane], b: Sequence[Lane]) -> Lane:

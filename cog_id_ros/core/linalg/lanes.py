@@ -8,8 +8,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from .straight_line import leaves
-from .value_types import FloatArray
+from ..value_types import FloatArray, Lane
 
 
 def columns(array: FloatArray) -> list[FloatArray]:
@@ -37,3 +36,10 @@ def flat(record: Iterable[Any], n: int) -> FloatArray:
     if not values:
         return np.zeros((n, 0))
     return np.column_stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in values])
+
+
+def leaves(value: Any) -> list[Lane]:
+    """The Syms and floats of a nested list/tuple structure, depth first."""
+    if isinstance(value, (list, tuple)):
+        return [x for item in value for x in leaves(item)]
+    return [value]

@@ -16,7 +16,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from .value_types import FloatArray, Lane, Ops, Rotation, Transform, Twist, Vec3
+from ..value_types import FloatArray, Lane, Ops, Rotation, Transform, Twist, Vec3
 
 IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 ZERO3 = (0.0, 0.0, 0.0)

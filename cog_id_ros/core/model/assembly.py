@@ -27,11 +27,13 @@ import warnings
 
 import numpy as np
 
-from . import assembly_search, closure, continuation, idle_spins, spherical_chains
-from . import kinematics as kin
-from . import spatial as sp
-from .errors import MechanismConfigError
-from .value_types import MechanismLike
+from ..closure import closure, continuation
+from ..errors import MechanismConfigError
+from ..kinematics import kinematics as kin
+from ..kinematics import spherical_chains
+from ..linalg import spatial as sp
+from ..value_types import MechanismLike
+from . import assembly_search, idle_spins
 
 #: assembly that moves a passive joint further than this from initial_positions is reported
 #: (rad for an angle; for a length this fraction of the mechanism's scale)

@@ -26,10 +26,10 @@ from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
-from . import closure
-from . import kinematics as kin
-from . import spatial as sp
-from .value_types import FloatArray
+from ..closure import closure
+from ..kinematics import kinematics as kin
+from ..linalg import spatial as sp
+from ..value_types import FloatArray
 
 #: Levenberg-Marquardt: iterations per start, the damping it starts with and its bounds;
 #: it stops where STALL iterations lowered |Phi|^2 by less than STALL_FRACTION together

@@ -16,10 +16,12 @@ from typing import Iterable
 
 import numpy as np
 
-from . import assembly, closure, idle_spins, spherical_chains
+from ..closure import closure
+from ..errors import MechanismConfigError
+from ..kinematics import spherical_chains
+from ..value_types import FloatArray, MechanismLike
+from . import assembly, idle_spins
 from .assembly import check_loops_hint
-from .errors import MechanismConfigError
-from .value_types import FloatArray, MechanismLike
 
 #: relative singular value below which A loses rank
 RANK_TOLERANCE = 1e-9

@@ -33,11 +33,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import kinematics as kin
-from . import spatial as sp
-from .errors import MechanismConfigError
-from .parameters import ParameterReader
-from .value_types import FloatArray, MechanismLike
+from ..errors import MechanismConfigError
+from ..kinematics import kinematics as kin
+from ..kinematics.parameters import ParameterReader
+from ..linalg import spatial as sp
+from ..value_types import FloatArray, MechanismLike
 
 #: the values of mechanism.idle_spins, the default first
 IDLE_SPINS = ('refuse', 'lock')

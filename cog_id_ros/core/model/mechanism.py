@@ -23,22 +23,16 @@ import warnings
 
 import numpy as np
 
-from . import (
-    assembly,
-    closure,
-    couplings,
-    degrees_of_freedom,
-    idle_spins,
-    joints,
-    spherical_chains,
-)
+from ..closure import closure
+from ..errors import MechanismConfigError
+from ..kinematics import couplings, joints, spherical_chains
+from ..kinematics.kinematics import BASE, JointSpec, KinematicModel
+from ..kinematics.parameters import ParameterReader, split_owner
+from ..kinematics.spherical_chains import SphericalChain
+from ..value_types import FloatArray
+from . import assembly, degrees_of_freedom, idle_spins
 from .assembly import AssemblyWarning
-from .errors import MechanismConfigError
-from .kinematics import BASE, JointSpec, KinematicModel
-from .parameters import ParameterReader, split_owner
-from .spherical_chains import SphericalChain
-from .transmission.joint_space import check_joint_space, read_joint_space
-from .value_types import FloatArray
+from .joint_space import check_joint_space, read_joint_space
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',

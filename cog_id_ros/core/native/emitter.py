@@ -24,8 +24,9 @@ from importlib import resources
 import math
 from typing import Any, Callable, Sequence
 
-from .straight_line import Graph, Sym, leaves, live_operations
-from .value_types import Lane
+from ..linalg.lanes import leaves
+from ..value_types import Lane
+from .straight_line import Graph, Sym, live_operations
 
 #: a kernel's parameters: (name, its input Syms, nested for rows)
 Params = Sequence[tuple[str, Any]]
@@ -373,7 +374,8 @@ def c_module_source(module: str, kernels: Sequence[tuple[str, Params, str, Field
     methods = [f'    {{"{name}{many}", (PyCFunction)(void (*)(void))kernel_{name}{many}, '
                f'METH_FASTCALL, "{text}"}},'
                for name, _, record, _ in kernels
-               for many, text in (('', f'{record} of the mechanism (cog_id_ros.core.kernels)'),
+               for many, text in (('', f'{record} of the mechanism '
+                                       '(cog_id_ros.core.native.kernels)'),
                                   ('_many', f'{name} over N samples: (N, width) float64 '
                                             f'arrays in, the (N, outputs) array written'))]
     methods += [f'    {{"{name}", (PyCFunction)(void (*)(void)){function}, METH_FASTCALL, '

@@ -43,21 +43,23 @@ import weakref
 
 import numpy as np
 
-from . import closure, joint_readout, native, native_simulation
-from . import spatial as sp
-from .continuation import prediction
+from ..closure import closure
+from ..closure.continuation import prediction
+from ..closure.joint_motion import projection_increment, velocity_basis
+from ..dynamics.forward_dynamics import forward_dynamics
+from ..dynamics.pipeline import inverse_dynamics
+from ..errors import MechanismConfigError
+from ..kinematics import joint_readout
+from ..kinematics.joint_readout import ReadoutPlan, ReadoutRecord, readout_record
+from ..linalg import spatial as sp
+from ..linalg.lanes import columns, flat
+from ..value_types import FloatArray, Lane, Ops
+from . import native, native_simulation
 from .emitter import c_module_source, python_function
-from .errors import MechanismConfigError
-from .forward_dynamics import forward_dynamics
-from .joint_motion import projection_increment, velocity_basis
-from .joint_readout import ReadoutPlan, ReadoutRecord, readout_record
-from .lanes import columns, flat
-from .pipeline import inverse_dynamics
 from .straight_line import Graph, SymOps
-from .value_types import FloatArray, Lane, Ops
 
 if TYPE_CHECKING:
-    from .mechanism import Mechanism
+    from ..model.mechanism import Mechanism
 
 #: a record's fields and their shapes (:func:`layouts`)
 Layout = list[tuple[str, tuple[int, ...]]]
@@ -438,11 +440,16 @@ def core_version() -> str:
     """A hash of the core's source files (its Python and the C of the kernels' prelude):
     what the kernels are made of."""
     digest = hashlib.sha256()
-    here = os.path.dirname(os.path.abspath(__file__))
-    for name in sorted(os.listdir(here)):
-        if name.endswith(('.py', '.c')):
-            with open(os.path.join(here, name), 'rb') as f:
-                digest.update(name.encode() + b'\0' + f.read())
+    # the whole of core/, every folder (this module is in core/native/)
+    core = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for folder, folders, names in os.walk(core):
+        folders[:] = sorted(f for f in folders if f != '__pycache__')
+        for name in sorted(names):
+            if name.endswith(('.py', '.c')):
+                path = os.path.join(folder, name)
+                with open(path, 'rb') as f:
+                    relative = os.path.relpath(path, core).replace(os.sep, '/')
+                    digest.update(relative.encode() + b'\0' + f.read())
     return digest.hexdigest()
 
 

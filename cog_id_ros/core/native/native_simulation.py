@@ -15,9 +15,9 @@ the Newton constants (newton.py).
 from importlib import resources
 from typing import Dict, List, Optional, Sequence, Tuple
 
-from . import newton
-from .continuation import TWO_PI, wrapping_actuators
-from .mechanism import Mechanism
+from ..closure import newton
+from ..closure.continuation import TWO_PI, wrapping_actuators
+from ..model.mechanism import Mechanism
 
 #: the C of the step (package data beside this module)
 C_SIMULATION = 'kernels_simulation.c'

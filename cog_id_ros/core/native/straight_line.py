@@ -20,8 +20,8 @@ taken as a truth value (an ``if``, ``and``, ``min``).
 import math
 from typing import Any, Callable, NoReturn, Sequence
 
-from .spatial import larger, smaller
-from .value_types import Lane
+from ..linalg.spatial import larger, smaller
+from ..value_types import Lane
 
 
 class Graph:
@@ -262,13 +262,6 @@ class SymOps:
         for x in lanes:
             out = _smaller(out, x)
         return out
-
-
-def leaves(value: Any) -> list[Lane]:
-    """The Syms and floats of a nested list/tuple structure, depth first."""
-    if isinstance(value, (list, tuple)):
-        return [x for item in value for x in leaves(item)]
-    return [value]
 
 
 def live_operations(graph: Graph, outputs: Sequence[Lane]) -> list[int]:

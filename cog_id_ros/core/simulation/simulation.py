@@ -31,22 +31,22 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import spatial as sp
-from .continuation import joint_step_limits
-from .errors import (
+from ..closure.continuation import joint_step_limits
+from ..closure.joint_motion import active_velocity_map, combine
+from ..dynamics.forward_dynamics import INERTIA_CONDITION_LIMIT
+from ..errors import (
     ClosureError,
     CogIdError,
     MechanismConfigError,
     SetpointError,
     SingularConfigurationError,
 )
-from .forward_dynamics import INERTIA_CONDITION_LIMIT
-from .forward_solve import LABELS, ForwardSolver, State
-from .inputs import setpoints
-from .joint_motion import active_velocity_map, combine
-from .kernels import ForwardRecord, kernels_for
-from .mechanism import Mechanism
-from .native_simulation import step_config
+from ..linalg import spatial as sp
+from ..model.mechanism import Mechanism
+from ..native.kernels import ForwardRecord, kernels_for
+from ..native.native_simulation import step_config
+from ..solve.forward_solve import LABELS, ForwardSolver, State
+from ..solve.inputs import setpoints
 from .simulation_error import (
     DEFAULT_TOLERANCE,
     PASS_CONDITION_LIMIT,

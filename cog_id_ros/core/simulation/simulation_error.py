@@ -41,18 +41,18 @@ import math
 import sys
 from typing import TYPE_CHECKING, Any, List, NamedTuple, Optional, Sequence, Tuple, cast
 
-from . import spatial as sp
-from .continuation import correction_ok, fits_one_step, joint_step_limits, wrapped_state
-from .errors import ClosureError, CogIdError, SingularConfigurationError
-from .forward_solve import checked
-from .kinematics import forward_kinematics, link_twists
-from .newton_euler import rotated_inertia_times
+from ..closure.continuation import correction_ok, fits_one_step, joint_step_limits, wrapped_state
+from ..dynamics.newton_euler import rotated_inertia_times
+from ..errors import ClosureError, CogIdError, SingularConfigurationError
+from ..kinematics.kinematics import forward_kinematics, link_twists
+from ..linalg import spatial as sp
+from ..solve.forward_solve import checked
 
 if TYPE_CHECKING:
-    from .continuation import State
-    from .kernels import ForwardRecord
-    from .mechanism import Mechanism
-    from .sample_solve import SampleSolver
+    from ..closure.continuation import State
+    from ..model.mechanism import Mechanism
+    from ..native.kernels import ForwardRecord
+    from ..solve.sample_solve import SampleSolver
 
 #: the default local error tolerance of a step (Simulation(tolerance=...)): position error in
 #: joint units (rad, or the mechanism's length scale), velocity error relative to the speed

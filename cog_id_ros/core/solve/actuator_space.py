@@ -12,18 +12,18 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 
-from . import spatial as sp
+from ..closure.continuation import State
+from ..closure.joint_motion import active_velocity_map, combine
+from ..dynamics.cog_jacobian import cog_poses
+from ..dynamics.pipeline import cog_jacobians_at, cog_motion, equation_of_motion
+from ..errors import MechanismConfigError, SetpointError
+from ..linalg import spatial as sp
+from ..linalg.lanes import stacked
+from ..model.mechanism import Mechanism
+from ..native.kernels import kernels_for
 from .batch import Batch, Evaluation
-from .cog_jacobian import cog_poses
-from .continuation import State
-from .errors import MechanismConfigError, SetpointError
 from .forward_solve import LABELS, ForwardSolver
 from .inputs import out_of_range, rates, setpoint_arrays, setpoints
-from .joint_motion import active_velocity_map, combine
-from .kernels import kernels_for
-from .lanes import stacked
-from .mechanism import Mechanism
-from .pipeline import cog_jacobians_at, cog_motion, equation_of_motion
 from .poses import Poses, PoseSolver
 from .sample_solve import SampleSolver
 

@@ -23,13 +23,14 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from . import closure
-from .errors import CogIdError
+from ..closure import closure
+from ..closure.joint_motion import projected_pose
+from ..closure.newton import REFINE_ITERATIONS
+from ..errors import CogIdError
+from ..linalg.lanes import columns
+from ..native.kernels import RECORDS, ClosureRecord, unpack
+from ..value_types import BoolArray, FloatArray, IntArray
 from .inputs import check_values, checked_sample, out_of_range
-from .joint_motion import projected_pose
-from .kernels import RECORDS, ClosureRecord, unpack
-from .lanes import columns
-from .newton import REFINE_ITERATIONS
 from .sample_solve import (
     NEWTON_ITERATIONS,
     NEWTON_MAX_INCREMENT,
@@ -40,12 +41,11 @@ from .sample_solve import (
     increment_left,
     relative_error,
 )
-from .value_types import BoolArray, FloatArray, IntArray
 
 if TYPE_CHECKING:
-    from .continuation import State
-    from .joint_motion import BasisLayout
-    from .mechanism import Mechanism
+    from ..closure.continuation import State
+    from ..closure.joint_motion import BasisLayout
+    from ..model.mechanism import Mechanism
 
 #: two closed poses of one setpoint closer than this fraction of the joints' step limits
 #: (1e-7 rad) are one pose: on one branch they differ by the Newton increments left (1e-9 or

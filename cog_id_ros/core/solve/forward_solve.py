@@ -12,13 +12,13 @@ from typing import Any, Optional, Sequence, Tuple, cast
 
 import numpy as np
 
+from ..closure.continuation import State
+from ..dynamics.forward_dynamics import INERTIA_CONDITION_LIMIT
+from ..errors import CogIdError, SetpointError, SingularConfigurationError
+from ..model.mechanism import Mechanism
+from ..native.kernels import ForwardRecord
 from .batch import Batch
-from .continuation import State
-from .errors import CogIdError, SetpointError, SingularConfigurationError
-from .forward_dynamics import INERTIA_CONDITION_LIMIT
 from .inputs import check_values
-from .kernels import ForwardRecord
-from .mechanism import Mechanism
 from .sample_solve import SampleSolver
 
 #: what forward dynamics calls its inputs in messages (inputs.LABELS for the torques)

@@ -11,12 +11,12 @@ from typing import TYPE_CHECKING, Any, Iterable, Sequence
 
 import numpy as np
 
-from .continuation import MAX_ANGLE
-from .errors import SetpointError
-from .value_types import FloatArray
+from ..closure.continuation import MAX_ANGLE
+from ..errors import SetpointError
+from ..value_types import FloatArray
 
 if TYPE_CHECKING:
-    from .mechanism import Mechanism
+    from ..model.mechanism import Mechanism
 
 #: the types of a control loop's setpoints (the fast path of setpoints)
 _FLOAT = {float}

@@ -10,18 +10,18 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from . import closure
-from . import spatial as sp
-from .errors import SingularConfigurationError
+from ..closure import closure
+from ..closure.joint_motion import velocity_basis
+from ..errors import SingularConfigurationError
+from ..linalg import spatial as sp
+from ..linalg.lanes import columns
+from ..value_types import LaneMatrix
 from .inputs import check_values, setpoint_arrays
-from .joint_motion import velocity_basis
-from .lanes import columns
-from .value_types import LaneMatrix
 
 if TYPE_CHECKING:
+    from ..closure.continuation import State
+    from ..model.mechanism import Mechanism
     from .batch import Batch
-    from .continuation import State
-    from .mechanism import Mechanism
     from .sample_solve import SampleSolver
 
 

@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from .closure import assemble, loops_closed
-from .continuation import (
+from ..closure.closure import assemble, loops_closed
+from ..closure.continuation import (
     MAX_STEPS,
     MIN_STEP,
     TWO_PI,
@@ -40,10 +40,8 @@ from .continuation import (
     wrapped_state,
     wrapping_actuators,
 )
-from .errors import ClosureError, SingularConfigurationError
-from .inputs import out_of_range
-from .joint_motion import BasisLayout, projected_pose
-from .newton import (
+from ..closure.joint_motion import BasisLayout, projected_pose
+from ..closure.newton import (
     ACCURACY_FACTOR,
     LIKELY_CLOSED,
     NEWTON_ITERATIONS,
@@ -51,11 +49,13 @@ from .newton import (
     REFINE_ITERATIONS,
     STAGNATION,
 )
-from .value_types import LaneMatrix
+from ..errors import ClosureError, SingularConfigurationError
+from ..value_types import LaneMatrix
+from .inputs import out_of_range
 
 if TYPE_CHECKING:
-    from .kernels import PoseRecord, ReferenceKernels
-    from .mechanism import Mechanism
+    from ..model.mechanism import Mechanism
+    from ..native.kernels import PoseRecord, ReferenceKernels
 
 #: Gauss-Newton iterations of the redundant projection, and the increment that ends it
 PROJECTION_ITERATIONS = 6

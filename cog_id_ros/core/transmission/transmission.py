@@ -1,6 +1,6 @@
 """Transmission: the exact map between actuator space and joint space, both ways.
 
-A mechanism that names ``mechanism.joint_space`` (joint_space.py) has two sets of
+A mechanism that names ``mechanism.joint_space`` (model/joint_space.py) has two sets of
 independent coordinates: the motors theta (active_joints, M) and the joints a controller
 commands q (joint_space, D = its degrees of freedom). Both close the same loops, so the map
 is two solvers of the same mechanism, each solving the loops with one set held:
@@ -29,10 +29,10 @@ from typing import Any, Literal, Optional, cast
 
 import numpy as np
 
-from ..actuator_space import ActuatorSpaceSolver, ArrayLike
 from ..errors import MechanismConfigError, SetpointError, SingularConfigurationError
-from ..mechanism import Mechanism
-from .joint_space import PARAMETER, seen_condition
+from ..model.joint_space import PARAMETER, seen_condition
+from ..model.mechanism import Mechanism
+from ..solve.actuator_space import ActuatorSpaceSolver, ArrayLike
 
 
 def joint_space_parameters(mechanism: Any) -> dict:

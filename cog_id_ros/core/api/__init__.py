@@ -1,0 +1,2 @@
+"""What users call: InverseDynamics, the solver of actuator space (solve/) that also takes a
+motion in joint space (transmission/)."""
