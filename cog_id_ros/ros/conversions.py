@@ -145,13 +145,24 @@ class JointSelector:
         return [where[j] for j in self.active_joints]
 
 
+#: rad or m: the largest position a joint may have (the core's bound, MAX_ANGLE); a larger
+#: one is refused before anything is done with it (unwrapped, compared with the last)
+MAX_POSITION = 1e9
+
+
 def _pick(values: Sequence[float], index: Sequence[int], what: str,
           kind: str) -> list[float]:
-    """The active entries of a message array as floats; Rejected for NaN or infinity."""
+    """The active entries of a message array as floats; Rejected for NaN or infinity, and
+    for a position beyond MAX_POSITION ('out_of_range': unwrapped, 1e20 would have become
+    an ordinary angle)."""
     out = [values[i] for i in index]
     if not all(map(math.isfinite, out)):
         bad = next(v for v in out if not math.isfinite(v))
         raise Rejected('non_finite', f'{what} {bad} ({kind}s must be finite)')
+    if what == 'position' and not all(abs(v) <= MAX_POSITION for v in out):
+        bad = next(v for v in out if not abs(v) <= MAX_POSITION)
+        raise Rejected('out_of_range', f'position {bad:g} of a {kind} is beyond +-'
+                                       f'{MAX_POSITION:g} (rad or m): not a joint position')
     return out
 
 

@@ -79,13 +79,15 @@ class MeasurementStream:
             if abs(rate) > limit:
                 raise Rejected('velocity', f'measured velocity of {joint} is {rate:.6g}, beyond '
                                f'max_measured_velocity ({limit:g}): not commanded from')
-        # a new stream after the timeout, or after a gap as long that the timer has not
-        # judged yet (this node was stopped or starved: its timeout waits for what arrived)
-        restart = self.stopped or (self.last_time is not None
-                                   and time.monotonic() - self.last_time >= self.timeout)
-        if restart and self.last_pose is not None:
+        # a new stream after the timeout (two states that agree); or after a gap as long
+        # that the timer has not judged yet: this node did not run (stopped or starved), the
+        # plant went on, and the first fresh state is the new reference as it comes (a
+        # plant in lockstep sends the next one only after a command)
+        gap = not self.stopped and self.last_time is not None and \
+            time.monotonic() - self.last_time >= self.timeout
+        if self.stopped and self.last_pose is not None:
             self._confirm_restart(q)
-        previous = self.candidate if restart else self.last_pose
+        previous = self.candidate if self.stopped else None if gap else self.last_pose
         if previous is not None:
             q = [nearest_turn(x, ref) if wrap else x
                  for x, ref, wrap in zip(q, previous, self.unwrap)]

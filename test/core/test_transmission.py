@@ -241,18 +241,19 @@ def test_a_joint_space_that_is_not_one_is_refused_naming_the_parameter(joint_spa
     assert err.value.parameter == 'mechanism.joint_space' and words in str(err.value)
 
 
-def test_joints_whose_rates_are_tied_are_refused_with_the_motion_left(knee):
-    """The knee has one freedom: the crank pin and the knee each determine it, but the
-    motor and the knee of a mechanism driven at the motor are tied; a joint space of a
-    locked-rate joint leaves the motion free."""
+def test_a_joint_space_that_misses_a_motion_is_refused_with_the_motion_left():
+    """The ankle driven by one motor with its roll locked has one freedom, pitch and both
+    motors moving together: a joint space of the locked roll sees none of it."""
     params = Mechanism.from_params_file(ANKLE).settled_parameters()
     params['mechanism.locked_joints'] = ['ankle_roll']
     params['mechanism.active_joints'] = ['motor_left']
     params['mechanism.joint_space'] = ['ankle_roll']
     with pytest.raises(MechanismConfigError) as err:
         Mechanism.from_parameters(params)
-    assert err.value.parameter == 'mechanism.joint_space'
-    assert 'does not determine the motion' in str(err.value) and 'ankle_pitch' in str(err.value)
+    assert err.value.parameter == 'mechanism.joint_space' and 'ankle_roll' in str(err.value)
+    from cog_id_ros.core.model.joint_space import seen_condition
+    assert seen_condition(np.zeros((1, 1))) == math.inf
+    assert seen_condition(np.eye(2)) == 1.0
 
 
 def test_without_a_joint_space_the_transmission_says_what_to_give():
@@ -262,3 +263,21 @@ def test_without_a_joint_space_the_transmission_says_what_to_give():
     assert 'mechanism.joint_space' in str(err.value)
     with pytest.raises(cog_id_ros.SetpointError):
         InverseDynamics(mech).torques([1.0], [0.0], [0.0], space='joints')
+
+
+def test_a_locked_joint_in_the_joint_space_is_named_as_locked():
+    """Adversarial pass: a locked joint was refused as 'rates tied'; it is held, say so."""
+    params = Mechanism.from_params_file(LEG).settled_parameters()
+    params['mechanism.joint_space'] = ['motor_hip_z', 'motor_hip_x', 'motor_hip_y',
+                                       'motor_knee', 'ankle_rod_2_rev2', 'motor_ankle']
+    with pytest.raises(MechanismConfigError) as err:
+        Mechanism.from_parameters(params)
+    assert 'mechanism.locked_joints' in str(err.value) and 'ankle_rod_2_rev2' in str(err.value)
+
+
+def test_a_joint_space_pose_past_the_toggle_says_so(knee):
+    """Adversarial pass: the knee asked past its toggle (0.7714 rad) said only 'send
+    setpoints closer together'; the error names the transmission and what is past reach."""
+    with pytest.raises(cog_id_ros.ClosureError) as err:
+        InverseDynamics(knee).torques([0.78], [0.0], [0.0], space='joint')
+    assert 'motor_knee' in str(err.value) and 'past what the linkage can reach' in str(err.value)

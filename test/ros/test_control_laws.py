@@ -279,9 +279,10 @@ def test_measured_states_checked():
 
 def test_a_gap_longer_than_the_timeout_restarts_the_stream_before_the_timer_judges_it():
     """Reliability item 2 (issue 32): the node stopped longer than measurement_timeout, its
-    timer not yet run: the fresh measured states are not jumps from the pose before the
-    gap; the first is a restart candidate, the next that agrees with it is commanded from.
-    The timer's stopped_for counts the silence from when the node ran again (``since``)."""
+    timer not yet run: the fresh measured state is not a jump from the pose before the gap
+    and is commanded from at once (a simulator in lockstep sends no second one before a
+    command); after a timeout the timer judged, two must agree (the restart rule). The
+    timer's stopped_for counts the silence from when the node ran again (``since``)."""
     import time
     mech = Mechanism.from_params_file('config/paper_four_bar_a.yaml')
     stream = MeasurementStream(config_for(mech, measurement_timeout=0.1), needs_velocities=True)
@@ -289,10 +290,42 @@ def test_a_gap_longer_than_the_timeout_restarts_the_stream_before_the_timer_judg
     stream.take(Msg(names, [1.0], [0.0]))
     stream.accept()
     time.sleep(0.12)                                       # the gap (a stopped node)
-    with pytest.raises(Rejected) as bad:
-        stream.take(Msg(names, [1.3], [0.0]))               # 0.3 rad on: not a jump now
-    assert bad.value.reason == 'restart'
-    assert stream.take(Msg(names, [1.31], [0.0]))[0] == [1.31]
     assert not stream.stopped_for(0.1, since=time.monotonic())   # woke just now: not yet
-    assert stream.stopped_for(0.1)                                # counted from the last one
-    assert not stream.stopped_for(0.1)                            # once
+    assert stream.take(Msg(names, [1.3], [0.0]))[0] == [1.3]     # 0.3 rad on: not a jump
+    stream.accept()
+    with pytest.raises(Rejected) as bad:
+        stream.take(Msg(names, [1.6], [0.0]))               # within the stream: a jump
+    assert bad.value.reason == 'jump'
+    time.sleep(0.12)
+    assert stream.stopped_for(0.1)                          # the timer judged: stopped
+    assert not stream.stopped_for(0.1)                      # once
+    with pytest.raises(Rejected) as bad:
+        stream.take(Msg(names, [0.2], [0.0]))               # after it: a candidate only
+    assert bad.value.reason == 'restart'
+    assert stream.take(Msg(names, [0.21], [0.0]))[0] == [0.21]
+
+
+def test_a_position_beyond_1e9_is_out_of_range_never_unwrapped():
+    """Adversarial pass (issue 29/32): 1e20 in a measured state or a setpoint was unwrapped
+    to an ordinary angle (served as about 0), or became the restart candidate every later
+    state agreed with (the controller silent for good). It is refused as out_of_range
+    before anything is done with it, and the stream goes on."""
+    import time
+    mech = Mechanism.from_params_file('config/paper_four_bar_a.yaml')
+    stream = MeasurementStream(config_for(mech, measurement_timeout=0.1), needs_velocities=True)
+    names = ['joint3']
+    stream.take(Msg(names, [1.0], [0.0]))
+    stream.accept()
+    for bad_value in (1e20, -3e9):
+        with pytest.raises(Rejected) as bad:
+            stream.take(Msg(names, [bad_value], [0.0]))
+        assert bad.value.reason == 'out_of_range'
+    time.sleep(0.12)
+    assert stream.stopped_for(0.1)
+    with pytest.raises(Rejected) as bad:
+        stream.take(Msg(names, [1e20], [0.0]))                # never the candidate
+    assert bad.value.reason == 'out_of_range'
+    with pytest.raises(Rejected) as bad:
+        stream.take(Msg(names, [1.0], [0.0]))
+    assert bad.value.reason == 'restart'
+    assert stream.take(Msg(names, [1.0], [0.0]))[0] == [1.0]

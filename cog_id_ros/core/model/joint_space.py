@@ -24,6 +24,10 @@ def read_joint_space(mech: Any, reader: Any) -> list[str]:
     joint of mechanism.joints (the reader refuses a name given twice)."""
     names = reader.string_list(PARAMETER) or []
     for name in names:
+        if name in getattr(mech, 'locked_joints', ()):
+            raise MechanismConfigError(
+                PARAMETER, f"'{name}' is held (mechanism.locked_joints): a joint that cannot "
+                           'move cannot be commanded')
         if name not in mech.joints:
             closure = name in getattr(mech, 'closure_joints', ())
             raise MechanismConfigError(

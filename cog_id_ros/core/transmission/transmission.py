@@ -29,7 +29,12 @@ from typing import Any, Literal, Optional, cast
 
 import numpy as np
 
-from ..errors import MechanismConfigError, SetpointError, SingularConfigurationError
+from ..errors import (
+    ClosureError,
+    MechanismConfigError,
+    SetpointError,
+    SingularConfigurationError,
+)
 from ..model.joint_space import PARAMETER, seen_condition
 from ..model.mechanism import Mechanism
 from ..solve.actuator_space import ActuatorSpaceSolver, ArrayLike
@@ -190,7 +195,8 @@ class Transmission:
 
 
 class _NamedSingular:
-    """Re-raises a solver's SingularConfigurationError naming both sets of joints."""
+    """Re-raises a solver's SingularConfigurationError or ClosureError naming both sets of
+    joints."""
 
     def __init__(self, transmission: Transmission) -> None:
         self.transmission = transmission
@@ -201,6 +207,14 @@ class _NamedSingular:
     def __exit__(self, kind: Any, exc: Any, tb: Any) -> Literal[False]:
         if isinstance(exc, SingularConfigurationError) and 'transmission' not in str(exc):
             raise self.transmission._singular(exc) from exc
+        if isinstance(exc, ClosureError) and 'transmission' not in str(exc):
+            t = self.transmission
+            raise ClosureError(
+                f"{exc} (the transmission between the motors ({', '.join(t.active_joints)}) "
+                f"and the joint space ({', '.join(t.joint_space)}): where the loops stop "
+                'closing on the way, the pose is past what the linkage can reach, e.g. '
+                'beyond the toggle of a crank)', exc.residual, exc.sample,
+                exc.reason) from exc
         return False
 
 
