@@ -92,6 +92,8 @@ class Rig:
             sent.append((time.monotonic(), stamp))
             k += 1
             time.sleep(max(0.0, start + k / rate - time.monotonic()))
+        if during is not None and hasattr(during, 'finish'):
+            during.finish()     # (a starved test process may end its stream mid-stall)
         return sent
 
 
@@ -128,7 +130,12 @@ def stall(proc, at, seconds):
                 time.monotonic() >= during.stopped + seconds:
             os.kill(proc.proc.pid, signal.SIGCONT)
             resumed.append(time.monotonic())
-    during.resumed = resumed
+
+    def finish():
+        if hasattr(during, 'stopped') and not resumed:
+            os.kill(proc.proc.pid, signal.SIGCONT)
+            resumed.append(time.monotonic())
+    during.resumed, during.finish = resumed, finish
     return during
 
 
