@@ -8,6 +8,7 @@ adds joint space to it), a thin face over the modules that do the work.
 
 Successive calls keep the assembly branch: each is warm-started from the previous one.
 """
+import math
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
@@ -204,13 +205,15 @@ class ActuatorSpaceSolver:
             raise out_of_range(rates_in, [], None)
         return positions.tolist(), qdot.tolist()
 
-    def closed_pose(self, q: Sequence[float], with_rates: bool = False
-                    ) -> Tuple[List[float], Optional[np.ndarray]]:
+    def closed_pose(self, q: Sequence[float], with_rates: bool = False,
+                    rows: Optional[Sequence[int]] = None) -> Tuple[List[float], Any]:
         """One sample at control rate: (every joint's position, mechanism.joints order; with
         ``with_rates`` the joint-rate map S (n_joints, M) there, else None) at the closed
         pose of the M actuator positions ``q``. The same numbers as :meth:`solve_positions`
         and :meth:`joint_rate_map` of one sample, through the lean sample path (no second
-        evaluation of the pose); the warm start moves there."""
+        evaluation of the pose); the warm start moves there. ``rows`` (joint indices): only
+        those rows of S, as lists of floats where the joints are the solver's own
+        coordinates (:meth:`_solved_rows`: the basis's rows as they are)."""
         m = self.mechanism
         target, _, _, single = setpoints(m, self._serial.wrapping, q, None, None,
                                          self.check_position_limits)
@@ -221,8 +224,13 @@ class ActuatorSpaceSolver:
         coordinates, n = state[0], len(m.joints)
         chains = m.spherical_chains          # (joints read back from the pose: the kernel)
         positions = m.joints_at(coordinates)[0].tolist() if chains else list(coordinates[:n])
-        s = None
-        if with_rates:
+        s: Any = None
+        solved_rows = self._solved_rows(rows) if with_rates and rows is not None else None
+        if solved_rows is not None:
+            s = _basis_rows(state[1], self._solved.primary, solved_rows, len(target))
+            if not all(math.isfinite(x) for row in s for x in row):
+                raise out_of_range(list(target), [], None)
+        elif with_rates:
             solved = active_velocity_map(self._solved, state[1], sp.ScalarOps)
             s = np.column_stack([cast(np.ndarray, m.joints_at(coordinates,
                                                              [row[k] for row in solved])[1])
@@ -230,8 +238,19 @@ class ActuatorSpaceSolver:
                 np.array(solved[:n], dtype=float)
             if not np.isfinite(s).all():
                 raise out_of_range(list(target), [], None)
+            if rows is not None:
+                s = s[list(rows)]
         self._state = state
         return positions, s
+
+    def _solved_rows(self, rows: Sequence[int]) -> Optional[List[int]]:
+        """The solver's coordinates of joints ``rows`` (mechanism.joints indices) where each
+        is one of its joints as written (not in a chain read back) and the mechanism is not
+        redundant: their rates are the velocity basis's rows; else None."""
+        solved, names = self._solved, self.mechanism.joints
+        if solved.is_redundant or not all(names[j] in solved.joint_index for j in rows):
+            return None
+        return [solved.joint_index[names[j]] for j in rows]
 
     def joint_rate_map(self, q: ArrayLike) -> np.ndarray:
         """S (n_joints, M), qdot = S thetadot, at the closed pose of ``q`` (M actuator
@@ -307,3 +326,16 @@ class ActuatorSpaceSolver:
         if not keep:
             self._state = at.state
         return values
+
+
+def _basis_rows(basis: Sequence[Sequence[float]], order: Sequence[int], rows: Sequence[int],
+                m: int) -> list[list[float]]:
+    """Rows ``rows`` of S from the velocity basis of a non-redundant mechanism: the basis's
+    column k is the rate per unit rate of primary actuator k, active joint order[k]."""
+    out = []
+    for j in rows:
+        row, b = [0.0] * m, basis[j]
+        for k, a in enumerate(order):
+            row[a] = b[k]
+        out.append(row)
+    return out

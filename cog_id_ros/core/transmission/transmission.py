@@ -25,6 +25,7 @@ it finds its loops singular (mechanism.max_condition_number) and the error names
 sets. Every call keeps each solver's assembly branch (warm starts), a batch follows the
 per-sample rule.
 """
+import math
 from typing import Any, Literal, Optional, cast
 
 import numpy as np
@@ -104,22 +105,26 @@ class Transmission:
         """J = dq/dtheta (D, M) at theta, or (N, D, M)."""
         with self._named():
             if _one(theta):
-                return _rate_map(self.actuators, theta)[self._q]
+                return np.array(self._rows_at(self.actuators, theta, self._q), dtype=float)
             return self.actuators.joint_rate_map(theta)[..., self._q, :]
 
     def inverse_jacobian(self, q: ArrayLike) -> np.ndarray:
         """K = dtheta/dq (M, D) at the joint-space position q, or (N, M, D)."""
         with self._named():
             if _one(q):
-                return _rate_map(self.joints, q)[self._theta]
+                return np.array(self._rows_at(self.joints, q, self._theta), dtype=float)
             return self.joints.joint_rate_map(q)[..., self._theta, :]
 
     def joint_velocities(self, theta: ArrayLike, theta_dot: ArrayLike) -> np.ndarray:
         """q_dot = J(theta) theta_dot: (D,) or (N, D)."""
+        if _one(theta):
+            return _times(self._rows_at(self.actuators, theta, self._q), theta_dot)
         return _apply(self.jacobian(theta), theta_dot)
 
     def actuator_velocities(self, q: ArrayLike, q_dot: ArrayLike) -> np.ndarray:
         """theta_dot = K(q) q_dot: (M,) or (N, M), the motors' rates of a joint-space motion."""
+        if _one(q):
+            return _times(self._rows_at(self.joints, q, self._theta), q_dot)
         return _apply(self.inverse_jacobian(q), q_dot)
 
     # --- efforts --------------------------------------------------------------------------
@@ -128,6 +133,9 @@ class Transmission:
         """tau_m = J^T tau_q (M,) or (N, M): the motors' share of joint-space efforts at
         theta, the linkage massless (its own inertia and gravity: :meth:`torques`);
         redundant, the one of least weighted norm."""
+        if _one(theta):
+            rows = self._rows_at(self.actuators, theta, self._q)
+            return _times([list(column) for column in zip(*rows)], tau_q)
         return _apply(np.swapaxes(self.jacobian(theta), -1, -2), tau_q)
 
     def joint_efforts(self, theta: ArrayLike, tau_m: ArrayLike) -> np.ndarray:
@@ -180,6 +188,11 @@ class Transmission:
 
     # --- helpers --------------------------------------------------------------------------
 
+    def _rows_at(self, solver: ActuatorSpaceSolver, x: ArrayLike, rows: list) -> Any:
+        """Rows ``rows`` of the joint-rate map S of one sample (lists of floats)."""
+        with self._named():
+            return solver.closed_pose(_floats(x), with_rates=True, rows=rows)[1]
+
     def _singular(self, error: SingularConfigurationError) -> SingularConfigurationError:
         where = '' if error.sample is None else f' at sample {error.sample}'
         return SingularConfigurationError(
@@ -214,7 +227,7 @@ class _NamedSingular:
                 f"and the joint space ({', '.join(t.joint_space)}): where the loops stop "
                 'closing on the way, the pose is past what the linkage can reach, e.g. '
                 'beyond the toggle of a crank)', exc.residual, exc.sample,
-                exc.reason) from exc
+                exc.reason or 'closure') from exc
         return False
 
 
@@ -235,6 +248,22 @@ def _rows(values: list, index: list) -> np.ndarray:
 def _rate_map(solver: ActuatorSpaceSolver, x: ArrayLike) -> np.ndarray:
     """S (n_joints, M) of one sample by the lean sample path."""
     return cast(np.ndarray, solver.closed_pose(_floats(x), with_rates=True)[1])
+
+
+def _times(rows: Any, vector: ArrayLike) -> np.ndarray:
+    """rows @ vector for one sample (lists of floats, or an array), on floats."""
+    width = len(rows[0]) if len(rows) else 0
+    values: Any = vector.tolist() if isinstance(vector, np.ndarray) else vector
+    try:
+        v = [float(x) for x in values]
+    except (TypeError, ValueError):
+        raise _shape(width, np.shape(vector)) from None
+    if len(v) != width:
+        raise _shape(width, np.shape(vector))
+    if not all(map(math.isfinite, v)):
+        raise SetpointError('velocities and efforts must be finite, got '
+                            f'{v}', reason='non_finite')
+    return np.array([sum(a * b for a, b in zip(row, v)) for row in rows], dtype=float)
 
 
 def _apply(matrices: np.ndarray, vectors: ArrayLike) -> np.ndarray:
