@@ -243,6 +243,11 @@ class ActuatorSpaceSolver:
         self._state = state
         return positions, s
 
+    def rate_scale(self) -> float:
+        """The size (Frobenius norm) of the velocity basis at the pose the solver is at:
+        every coordinate's rate per unit rate of the primary actuators, over all of them."""
+        return math.sqrt(sum(x * x for row in self._state[1] for x in row))
+
     def _solved_rows(self, rows: Sequence[int]) -> Optional[List[int]]:
         """The solver's coordinates of joints ``rows`` (mechanism.joints indices) where each
         is one of its joints as written (not in a chain read back) and the mechanism is not

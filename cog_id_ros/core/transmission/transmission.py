@@ -142,6 +142,14 @@ class Transmission:
         """tau_q = K^T tau_m (D,) or (N, D): the joint-space efforts the motors' efforts make
         at theta (the linkage massless). One sample: K from the motion at theta alone
         (:meth:`_inverse_at`); N samples: from the joints' solver at each q."""
+        if _one(theta) and not self.redundant:
+            jac = np.array(self._rows_at(self.actuators, theta, self._q), dtype=float)
+            least = np.linalg.svd(jac, compute_uv=False)[-1]
+            # seen_condition of the joint space is at most scale / least (the basis's
+            # primary columns are unit rates): well within the bound, K = J^-1 at once
+            if least > 0.0 and self.actuators.rate_scale() / least <= \
+                    self.mechanism.max_condition_number:
+                return _times(np.linalg.inv(jac).T.tolist(), tau_m)
         if _one(theta):
             with self._named():
                 k = self._inverse_at(_rate_map(self.actuators, theta))
