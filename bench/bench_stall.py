@@ -35,6 +35,8 @@ import time
 
 import numpy as np
 
+from cog_id_ros.demos.closed_loop import stop
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 CONFIG = os.path.join(REPO, 'config', 'paper_four_bar_a.yaml')
@@ -171,12 +173,7 @@ def run_once(case, stall, rate, reliable, k_run):
                 'sent': len(sent)}
     finally:
         probe.close()
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop(proc)
 
 
 def main(argv=None):

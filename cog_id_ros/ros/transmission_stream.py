@@ -115,10 +115,8 @@ class StateMap:
         theta, theta_dot, tau_m = state_arrays(msg, self.selector, 'actuator state')
         t = self.transmission
         try:
-            t.to_joint_space(theta)         # singular poses named by both sets of joints
-            positions = t.actuators.solve_positions(theta)
-            rates = None if theta_dot is None else \
-                t.actuators.joint_rate_map(theta) @ np.asarray(theta_dot, dtype=float)
+            # (one solve; singular poses named by both sets of joints)
+            positions, rates = t.joint_state(theta, theta_dot)
             efforts = None if tau_m is None else self._efforts(theta, tau_m)
         except CogIdError as exc:
             raise rejection(exc) from None

@@ -206,17 +206,20 @@ class ActuatorSpaceSolver:
         return positions.tolist(), qdot.tolist()
 
     def closed_pose(self, q: Sequence[float], with_rates: bool = False,
-                    rows: Optional[Sequence[int]] = None) -> Tuple[List[float], Any]:
+                    rows: Optional[Sequence[int]] = None,
+                    limits: Optional[bool] = None) -> Tuple[List[float], Any]:
         """One sample at control rate: (every joint's position, mechanism.joints order; with
         ``with_rates`` the joint-rate map S (n_joints, M) there, else None) at the closed
         pose of the M actuator positions ``q``. The same numbers as :meth:`solve_positions`
         and :meth:`joint_rate_map` of one sample, through the lean sample path (no second
         evaluation of the pose); the warm start moves there. ``rows`` (joint indices): only
         those rows of S, as lists of floats where the joints are the solver's own
-        coordinates (:meth:`_solved_rows`: the basis's rows as they are)."""
+        coordinates (:meth:`_solved_rows`: the basis's rows as they are). ``limits``: the
+        actuators' position limits checked (default: check_position_limits)."""
         m = self.mechanism
         target, _, _, single = setpoints(m, self._serial.wrapping, q, None, None,
-                                         self.check_position_limits)
+                                         self.check_position_limits if limits is None
+                                         else limits)
         if not single:
             raise SetpointError(f'closed_pose takes one sample (one number per active '
                                 f'joint), got shape {np.shape(q)}')
@@ -263,19 +266,11 @@ class ActuatorSpaceSolver:
         n_joints, M) for N samples, solved one after the other from the warm start (the
         per-sample rule). Redundant actuation: the map of docs/api.md (torque_weights)."""
         positions, _, _, single = setpoint_arrays(self.mechanism, q, None, None)
-        maps = [self._rate_map_at(row) for row in positions]
+        # (the actuators' limits checked on every sample, as the per-pose queries do)
+        maps = [self.closed_pose(row.tolist(), with_rates=True, limits=True)[1]
+                for row in positions]
         return maps[0] if single else np.array(maps).reshape(len(positions), -1,
                                                              positions.shape[1])
-
-    def _rate_map_at(self, q: np.ndarray) -> np.ndarray:
-        m = self.mechanism
-        at = self._poses.at(self._state, q, None, solved=True)
-        coordinates, basis = at.state
-        s = np.array(active_velocity_map(self._solved, basis, sp.ScalarOps), dtype=float)
-        columns = s.shape[1]
-        _, rates = m.joints_at(np.tile(np.asarray(coordinates, dtype=float), (columns, 1)),
-                               s.T)
-        return self._moved_to(at, np.asarray(rates).T)
 
     def cog_poses(self, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray]:
         """g_i (eq. 1): (positions (..., n_links, 3), rotations (..., n_links, 3, 3))."""

@@ -99,6 +99,18 @@ class Transmission:
                 return _rows(self.joints.closed_pose(_floats(q))[0], self._theta)
             return self.joints.solve_positions(q)[..., self._theta]
 
+    def joint_state(self, theta: ArrayLike, theta_dot: Optional[ArrayLike] = None
+                    ) -> tuple[np.ndarray, Optional[np.ndarray]]:
+        """One sample: (every joint's position, mechanism.joints order; with ``theta_dot``
+        every joint's rate S theta_dot, else None) at the motors' positions theta, from one
+        solve (what a joint_states message of the whole mechanism holds)."""
+        with self._named():
+            positions, s = self.actuators.closed_pose(_floats(theta),
+                                                      with_rates=theta_dot is not None)
+        if theta_dot is None:
+            return np.array(positions), None
+        return np.array(positions), _times(s, theta_dot)
+
     # --- velocities -----------------------------------------------------------------------
 
     def jacobian(self, theta: ArrayLike) -> np.ndarray:
