@@ -11,7 +11,8 @@ and, within a stream, unwrapping and the step since the last accepted measuremen
 commanded from at all (``publishers``: a stale recording or a second simulator never takes
 over the controller), and after a timeout the new stream starts only once two measured
 states in a row agree within ``max_measurement_step`` (``restart``: the first message after
-a gap is not trusted as the reference alone). Whether the loops close at the measured pose
+a timeout is not trusted as the reference alone; after a stall of the node itself, which
+its timer has not judged yet, the first fresh one is). Whether the loops close at the measured pose
 is the mode's solve (:mod:`.feedback`). The node calls :meth:`MeasurementStream.accept` once the
 command is published; :meth:`MeasurementStream.stopped_for` says when no measurement was
 accepted for the timeout (``timeout_behavior`` then applies, once, and the next

@@ -50,10 +50,10 @@ def check_joint_space(mech: Any, equations: np.ndarray) -> None:
                        f'({mech.dof}), got {len(names)}: {", ".join(names)}')
     basis = _motions(equations, mech.n_coordinates, mech.dof)   # (n, dof)
     rows = basis[[mech.joint_index[name] for name in names]]  # (dof, dof)
-    u, s, vt = np.linalg.svd(rows)
     condition = seen_condition(rows)
     if condition <= mech.max_condition_number:
         return
+    u, _, vt = np.linalg.svd(rows)          # (the refusal says what moves and what is tied)
     moving = basis @ vt[-1]
     scale = np.abs(moving).max()
     still = [mech.joints[j] for j in range(len(mech.joints))
