@@ -63,21 +63,11 @@ class JointSpaceSolver:
         for i in np.flatnonzero(valid).tolist():
             try:
                 theta = tr.to_actuator_space(q[i])
-                jac = tr.jacobian(theta)
-                rates[i] = _motor_rates(tr, jac, q[i], qd[i])
+                rates[i] = tr.actuator_velocities(q[i], qd[i])      # K q_dot
+                torques[i] = tr.actuator_efforts(theta, tau_q[i])   # J^T tau_q
             except cog_id_ros.CogIdError as exc:
                 if on_invalid == 'raise':
                     exc.sample = i          # the row in this chunk (solving.solve names it)
                     raise
                 valid[i], errors[i] = False, exc
-                continue
-            torques[i] = np.einsum('rc,r->c', jac, tau_q[i])    # J^T tau_q
         return SimpleNamespace(torques=torques, valid=valid, errors=errors, rates=rates)
-
-
-def _motor_rates(tr, jac, q, qd):
-    """theta_dot = K q_dot: J's inverse where J is square, else K (the consistent rates of
-    every motor, a redundant one too) from the joints' solver."""
-    if not tr.redundant:
-        return np.linalg.solve(jac, qd)
-    return tr.inverse_jacobian(q) @ qd
