@@ -251,6 +251,27 @@ def play_target(probe, rclpy_context, joints, with_velocity, seconds=2.0):
     return t, stamps
 
 
+def answers_settled(probe, stamps, quiet=1.0):
+    """True once the node answered the motion's end or its answers stopped coming for
+    ``quiet`` s after some of the motion was answered. Not "the last setpoint answered":
+    setpoints go best effort, so one lost in transport at the very end of a stream is
+    neither delivered nor counted (no later sequence number shows the gap; a loaded CI run
+    lost the last of 2001 so). The callers count what arrived."""
+    motion = set(stamps)
+    seen = {'count': -1, 'since': time.monotonic()}
+
+    def done():
+        if probe.effort_at(stamps[-1]) is not None:
+            return True
+        count = len(probe.efforts)
+        if count != seen['count']:
+            seen['count'], seen['since'] = count, time.monotonic()
+            return False
+        return time.monotonic() - seen['since'] >= quiet and \
+            any(_ns(m.header.stamp) in motion for m in list(probe.efforts))
+    return wait_until(done)
+
+
 def settled(received, window=4):
     """Indices whose ``window - 1`` predecessors all came back: the estimator's window is
     full of consecutive setpoints there (the first samples, and those just after a setpoint
@@ -265,8 +286,7 @@ def test_target_motion_at_1khz_matches_the_exact_torques(nodes, rclpy_context):
     probe = probes['a']
     n_commands = len(probe.commands)
     t, stamps = play_target(probe, rclpy_context, ['joint3'], with_velocity=False)
-    assert wait_until(lambda: probe.effort_at(stamps[-1]) is not None), \
-        procs[probe.namespace[1:]].output[-3000:]
+    assert answers_settled(probe, stamps), procs[probe.namespace[1:]].output[-3000:]
     th, _, thdd = target(t)
     exact = exact_a(th, thdd)
     peak = np.abs(exact).max()
@@ -291,8 +311,7 @@ def test_redundant_target_motion_with_velocities(nodes, rclpy_context):
     procs, probes = nodes
     probe = probes['b']
     t, stamps = play_target(probe, rclpy_context, ['joint1', 'joint3'], with_velocity=True)
-    assert wait_until(lambda: probe.effort_at(stamps[-1]) is not None), \
-        procs[probe.namespace[1:]].output[-3000:]
+    assert answers_settled(probe, stamps), procs[probe.namespace[1:]].output[-3000:]
     th, _, thdd = target(t)
     half = 0.5 * exact_a(th, thdd)
     peak = np.abs(half).max()
