@@ -92,9 +92,13 @@ class LoopOracle:
     """Pinocchio model of ``urdf`` (text) with the loops of ``loops`` (the loop-closure
     file's text) and active joints ``active`` (default: its name_mot)."""
 
-    def __init__(self, urdf, loops, gravity=(0.0, 0.0, -9.81), active=None, held=()):
+    def __init__(self, urdf, loops, gravity=(0.0, 0.0, -9.81), active=None, held=(),
+                 free_flyer=False):
         spec = yaml.safe_load(loops)
-        model = pin.buildModelFromXML(urdf)
+        model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer()) if free_flyer else \
+            pin.buildModelFromXML(urdf)
+        #: the free flyer's velocity indices (held like the actuators when closing loops)
+        self.ib = list(range(6)) if free_flyer else []
         model.gravity.linear = np.array(gravity, dtype=float)
         self.model = _edited(model, dict(zip(spec.get('joint_name', []),
                                              spec.get('joint_type', []))))
@@ -111,6 +115,7 @@ class LoopOracle:
         self.ih = [self.v_index(name) for name in self.held]
 
     def v_index(self, name):
+        assert self.model.existJointName(name), name
         joint = self.model.joints[self.model.getJointId(name)]
         assert joint.nv == 1, name
         return joint.idx_v
@@ -204,7 +209,7 @@ class LoopOracle:
     def close(self, q, tol=1e-12, iterations=30):
         """q with the loops closed, the active joints held (Gauss-Newton; the last
         iterations only polish rounding)."""
-        free = [k for k in range(self.model.nv) if k not in self.ia + self.ih]
+        free = [k for k in range(self.model.nv) if k not in self.ia + self.ih + self.ib]
         for k in range(iterations):
             r = self.residual(q)
             if np.linalg.norm(r) < tol or k > 10 and np.linalg.norm(r) < 1e3 * tol:
@@ -233,3 +238,41 @@ class LoopOracle:
         tau_tree = pin.rnea(self.model, self.data, q, v, a)
         tau = va @ np.linalg.solve(va.T @ va, basis.T @ tau_tree)   # least norm
         return tau, v, a
+
+    # ------------------------------------------------------------------ free flyer
+    def add_contact(self, name, link, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)):
+        """A frame ``name`` on the body of URDF link ``link`` at (xyz, rpy) in its frame."""
+        parent = self.model.frames[self.model.getFrameId(link)]
+        place = parent.placement * pin.SE3(pin.rpy.rpyToMatrix(np.array(rpy, dtype=float)),
+                                           np.array(xyz, dtype=float))
+        self.model.addFrame(pin.Frame(name, parent.parentJoint, self.model.getFrameId(link),
+                                      place, pin.FrameType.OP_FRAME), False)
+        self.data = self.model.createData()
+
+    def whole_body(self, q, base_v, base_a, qd_active, qdd_active, contacts, weights=None):
+        """(efforts, wrenches (k,), base_wrench) at the closed pose q of a free-flyer model:
+        the generalized forces of the independent coordinates (the base's six, then the
+        actuators) are V_i^-T V^T (rnea - J_c^T w); the wrenches w (world axes at each
+        contact frame, ``contacts``: (frame name, 6 or 3)) of least weighted norm with the
+        base's six rows zero (least squares where none is)."""
+        jac = self.velocity_jacobian(q)
+        basis = _null_space(jac)
+        independent = self.ib + self.ia
+        vi = basis[independent]
+        assert np.linalg.matrix_rank(vi) == basis.shape[1] == len(independent)
+        v = basis @ np.linalg.solve(vi, np.concatenate([base_v, qd_active]))
+        particular = -np.linalg.lstsq(jac, self.drift(q, v), rcond=1e-10)[0]
+        a = particular + basis @ np.linalg.solve(
+            vi, np.concatenate([base_a, qdd_active]) - particular[independent])
+        to_independent = np.linalg.inv(vi).T @ basis.T            # (6 + M, nv)
+        generalized = to_independent @ pin.rnea(self.model, self.data, q, v, a)
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        columns = [pin.getFrameJacobian(self.model, self.data, self.model.getFrameId(name),
+                                        _ALIGNED)[:size].T for name, size in contacts]
+        maps = to_independent @ (np.hstack(columns) if columns else np.zeros((self.model.nv, 0)))
+        base_map, weights = maps[:6], np.ones(maps.shape[1]) if weights is None else weights
+        scale = 1.0 / np.sqrt(weights)
+        w = scale * (np.linalg.pinv(base_map * scale, rcond=1e-10) @ generalized[:6]) \
+            if maps.shape[1] else np.zeros(0)
+        return generalized[6:] - maps[6:] @ w, w, generalized[:6] - base_map @ w

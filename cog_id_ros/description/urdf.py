@@ -165,6 +165,7 @@ def _native(r, robot, closures, base, bodies, loop_file):
         out[f'links.{name}.mass'] = float(mass)
         out[f'links.{name}.com'] = com
         out[f'links.{name}.inertia'] = six(inertia)
+    _floating(out, robot, bodies, base)
     for joint in tree_joints:
         _native_joint(out, bodies, joint.name, joint.joint_kind.name,
                       joint.parent, joint.child, (joint.xyz, joint.rpy, ZERO, ZERO),
@@ -195,6 +196,25 @@ def _native(r, robot, closures, base, bodies, loop_file):
         if closure.axis2 is not None:
             out[f'joints.{closure.name}.axis2'] = [float(x) for x in closure.axis2]
     return out
+
+
+def _floating(out, robot, bodies, base):
+    """A floating base: the base body's mass properties (every link welded to it), and each
+    contact on a welded link moved to its body's frame (the contact stays where it was)."""
+    if out.get('mechanism.floating_base') is True:
+        mass, com, inertia = mass_properties(bodies, base)
+        out[f'links.{base}.mass'] = float(mass)
+        out[f'links.{base}.com'] = com
+        out[f'links.{base}.inertia'] = six(inertia)
+    prefix = 'mechanism.contacts.'
+    for key in [k for k in out if k.startswith(prefix) and k.endswith('.link')]:
+        link, name = out[key], key[len(prefix):-len('.link')]
+        if not isinstance(link, str) or link not in robot.links or bodies.body[link] == link:
+            continue
+        xyz = out.get(f'{prefix}{name}.xyz', [0.0, 0.0, 0.0])
+        rpy = out.get(f'{prefix}{name}.rpy', [0.0, 0.0, 0.0])
+        out[key] = bodies.body[link]
+        out[f'{prefix}{name}.xyz'], out[f'{prefix}{name}.rpy'] = bodies.attach(link, xyz, rpy)
 
 
 def _native_joint(out, bodies, name, kind, parent, child, offsets, axis):

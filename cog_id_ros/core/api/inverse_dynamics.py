@@ -17,9 +17,10 @@ import numpy as np
 from ..errors import SetpointError
 from ..solve.actuator_space import ActuatorSpaceSolver, ArrayLike
 from ..solve.batch import Evaluation
+from ..solve.whole_body import WholeBodyEfforts, whole_body_torques
 from ..transmission.transmission import Transmission
 
-__all__ = ['ArrayLike', 'Evaluation', 'InverseDynamics']
+__all__ = ['ArrayLike', 'Evaluation', 'InverseDynamics', 'WholeBodyEfforts']
 
 SPACES = ('actuator', 'joint')
 
@@ -77,6 +78,23 @@ class InverseDynamics(ActuatorSpaceSolver):
         if _space(space) == 'joint':
             return self.transmission.forward_dynamics(q, qd, tau)
         return super().forward_dynamics(q, qd, tau)
+
+    def whole_body_torques(self, base_pose: ArrayLike, base_velocity: Optional[ArrayLike],
+                           base_acceleration: Optional[ArrayLike], theta: ArrayLike,
+                           theta_dot: Optional[ArrayLike] = None,
+                           theta_ddot: Optional[ArrayLike] = None,
+                           contacts: Optional[list] = None,
+                           wrench_weights: Optional[object] = None) -> WholeBodyEfforts:
+        """A floating robot (mechanism.floating_base): the actuator efforts, the contact
+        wrenches and what is left for the world at the root (``base_wrench``) of a motion of
+        the base and the actuators (docs/floating_base.md). ``contacts``: names of
+        mechanism.contacts touching now (None: all of them; []: none); ``wrench_weights``:
+        per contact 6 or 3 positive weights (a dict by name, or a list in ``contacts``
+        order); the wrenches are those of least weighted norm that produce the motion.
+        Batch: every argument with a leading N. The pose is solved as :meth:`torques` solves
+        it (warm start, branch, errors)."""
+        return whole_body_torques(self, base_pose, base_velocity, base_acceleration, theta,
+                                  theta_dot, theta_ddot, contacts, wrench_weights)
 
 
 def _space(space: object) -> str:

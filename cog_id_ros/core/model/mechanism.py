@@ -32,12 +32,13 @@ from ..kinematics.spherical_chains import SphericalChain
 from ..value_types import FloatArray
 from . import assembly, degrees_of_freedom, idle_spins
 from .assembly import AssemblyWarning
+from .floating_base import read_floating_base
 from .joint_space import check_joint_space, read_joint_space
 
 MECHANISM_KEYS = ('name', 'gravity', 'base_link', 'links', 'joints', 'active_joints',
                   'initial_positions', 'torque_weights', 'setpoint_tolerance',
                   'max_condition_number', 'closure_tolerance', 'locked_joints', 'idle_spins',
-                  'found_at_assembly', 'assembly', 'joint_space')
+                  'found_at_assembly', 'assembly', 'joint_space', 'floating_base', 'contacts')
 LINK_KEYS = ('mass', 'com', 'inertia')
 JOINT_KEYS = ('type', 'parent', 'child', 'parent_xyz', 'parent_rpy', 'child_xyz', 'child_rpy',
               'axis', 'axis2') + couplings.KEYS + ('lower', 'upper', 'effort')
@@ -110,6 +111,8 @@ class Mechanism:
         idle_spins.read_locks(self, reader)
         #: mechanism.joint_space: the joints a controller commands ([]: none; transmission/)
         self.joint_space = read_joint_space(self, reader)
+        #: mechanism.floating_base, the base's mass properties, mechanism.contacts
+        read_floating_base(self, reader, lambda prefix: read_inertial(reader, prefix, False))
         self._reject_unknown(reader)
         self.model = KinematicModel(self.links, self.joint_specs, self.closure_specs, [
             couplings.constraint(f, self.joints.index(f), self.joints.index(leader), m, o)
@@ -213,18 +216,10 @@ class Mechanism:
     def _read_links(self, r: ParameterReader) -> None:
         self.link_mass, self.link_com, self.link_inertia = [], [], []
         for link in self.links:
-            prefix = f'links.{link}.'
-            mass = r.number(prefix + 'mass', required=True)
-            if mass < 0.0:
-                raise MechanismConfigError(prefix + 'mass', f'must be >= 0, got {mass!r}')
-            if mass > MAX_MASS:
-                raise MechanismConfigError(
-                    prefix + 'mass', f'must be at most {MAX_MASS:g} kg, got {mass!r}')
+            mass, com, inertia = read_inertial(r, f'links.{link}.')
             self.link_mass.append(mass)
-            self.link_com.append(bounded(
-                prefix + 'com', r.vector(prefix + 'com', 3, default=(0.0, 0.0, 0.0)),
-                MAX_LENGTH, 'm'))
-            self.link_inertia.append(_inertia(r, prefix + 'inertia'))
+            self.link_com.append(com)
+            self.link_inertia.append(inertia)
         masses = sorted(m for m in self.link_mass if m > 0.0)
         median = masses[len(masses) // 2] if masses else 0.0
         for link, mass in zip(self.links, self.link_mass):
@@ -487,6 +482,22 @@ class Mechanism:
     def __repr__(self) -> str:
         return (f'Mechanism({self.name!r}: {len(self.links)} links, {len(self.joints)} joints, '
                 f'{len(self.model.loops)} loops, {self.dof} DOF, active {self.active_joints})')
+
+
+def read_inertial(r: ParameterReader, prefix: str, required: bool = True
+                  ) -> tuple[float, tuple[float, ...], tuple[float, ...]]:
+    """(mass, COG, inertia as a row-major 9-tuple) of ``<prefix>mass``, ``com``,
+    ``inertia`` (the mass 0 when not ``required`` and absent)."""
+    mass = r.number(prefix + 'mass', required=True) if required else \
+        r.number(prefix + 'mass', default=0.0)
+    if mass < 0.0:
+        raise MechanismConfigError(prefix + 'mass', f'must be >= 0, got {mass!r}')
+    if mass > MAX_MASS:
+        raise MechanismConfigError(prefix + 'mass',
+                                   f'must be at most {MAX_MASS:g} kg, got {mass!r}')
+    com = bounded(prefix + 'com', r.vector(prefix + 'com', 3, default=(0.0, 0.0, 0.0)),
+                  MAX_LENGTH, 'm')
+    return mass, com, _inertia(r, prefix + 'inertia')
 
 
 def _inertia(r: ParameterReader, name: str) -> tuple[float, ...]:

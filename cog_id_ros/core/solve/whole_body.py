@@ -1,0 +1,177 @@
+"""Whole-body inverse dynamics of a floating robot: efforts, contact wrenches, base wrench.
+
+    pose and basis at theta            poses.py (the closed pose, warm-started, as torques)
+    Q_b, tau, A, C                     dynamics/floating_base.py (the equations)
+    w = argmin sum_k weight_k w_k^2    among the wrenches with A w = Q_b     contact_wrenches
+        (least squares in A w - Q_b where no wrench makes the motion: the rest is left)
+    base_wrench = Q_b - A w,  efforts = tau - C w
+
+Conventions (Pinocchio's free flyer): base_pose (x, y, z, qx, qy, qz, qw), world from base;
+base_velocity (v, w) and base_acceleration (its time derivative) in the base frame; contact
+wrenches (f, m) in world axes at the contact point, what the ground applies to the robot;
+base_wrench (force, moment) in the base frame at its origin.
+"""
+from typing import Any, NamedTuple, Optional, Sequence
+
+import numpy as np
+
+from ..dynamics.floating_base import contact_maps, whole_body_forces
+from ..errors import MechanismConfigError, SetpointError
+from ..linalg.lanes import columns
+
+#: relative size below which a direction of the contact map counts as missing (pinv cutoff)
+RANK_TOLERANCE = 1e-10
+
+
+class WholeBodyEfforts(NamedTuple):
+    """What :func:`whole_body_torques` returns; arrays gain a leading N for N samples."""
+
+    efforts: np.ndarray            # (M,) actuator efforts, active_joints order
+    wrenches: dict                 # contact name -> (6,) or (3,) world axes, at the point
+    base_wrench: np.ndarray        # (6,) what the world must still apply at the root
+
+
+def whole_body_torques(solver: Any, base_pose: Any, base_velocity: Any, base_acceleration: Any,
+                       theta: Any, theta_dot: Any, theta_ddot: Any,
+                       contacts: Optional[Sequence[str]], wrench_weights: Any
+                       ) -> WholeBodyEfforts:
+    """The efforts, wrenches and base wrench of a motion (docs/floating_base.md);
+    ``solver``: an ActuatorSpaceSolver of a mechanism with floating_base."""
+    mech = solver.mechanism
+    if not mech.floating_base:
+        raise MechanismConfigError('mechanism.floating_base', 'whole_body_torques needs a '
+                                                              'floating base: set it true')
+    names = list(mech.contacts) if contacts is None else list(contacts)
+    for name in names:
+        if name not in mech.contacts:
+            raise SetpointError(f"contacts: '{name}' is not in mechanism.contacts "
+                                f"({', '.join(mech.contacts) or 'none'})")
+    if len(set(names)) != len(names):
+        raise SetpointError(f'contacts: a contact named twice in {names}')
+    solved = mech.solver_mechanism
+    at = solver._poses.at(solver._state, theta, theta_dot, solved=True)
+    n = 1 if at.single else len(at.qd)
+    pose, velocity, acceleration = _base_state(base_pose, base_velocity, base_acceleration, n,
+                                               at.single)
+    qdd = _accelerations(theta_ddot, at.qd.shape)
+    lanes = (lambda a: a[0].tolist()) if at.single else columns
+    rotation = lanes(_rotation(pose[:, 3:]))
+    v, dv = lanes(velocity), lanes(acceleration)
+    base = (tuple(v[:3]), tuple(v[3:]), tuple(dv[:3]), tuple(dv[3:]))
+    with np.errstate(all='ignore'):
+        base_rows, tau_rows, cogs, jac = whole_body_forces(
+            solved, at.pose, at.basis, at.rates, lanes(qdd), base, rotation, at.ops)
+        chosen = [solved.contacts[name] for name in names]
+        a_rows, c_rows = contact_maps(solved, at.pose, cogs, jac, chosen, rotation)
+    q_base, tau = _rows(base_rows, n), _rows(tau_rows, n)
+    a_map, c_map = _maps(a_rows, n), _maps(c_rows, n)
+    weights = _weights(chosen, wrench_weights)
+    w = contact_wrenches(a_map, q_base, weights)
+    efforts = tau - np.einsum('nmk,nk->nm', c_map, w)
+    base_wrench = q_base - np.einsum('nrk,nk->nr', a_map, w)
+    solver._moved_to(at, np.concatenate([efforts, base_wrench, w], axis=1))
+    wrenches, start = {}, 0
+    for contact in chosen:
+        part = w[:, start:start + contact.size]
+        wrenches[contact.name] = part[0] if at.single else part
+        start += contact.size
+    if at.single:
+        return WholeBodyEfforts(efforts[0], wrenches, base_wrench[0])
+    return WholeBodyEfforts(efforts, wrenches, base_wrench)
+
+
+def contact_wrenches(a_map: np.ndarray, q_base: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(N, k): per sample the wrenches w of least sum weight w^2 with A w = Q_b, or, where no
+    w makes it, those of least weighted norm among the ones nearest to it (least squares):
+    w = W^-1/2 pinv(A W^-1/2) Q_b."""
+    if a_map.shape[2] == 0:
+        return np.zeros((len(q_base), 0))
+    scale = 1.0 / np.sqrt(weights)
+    scaled = a_map * scale
+    return scale * np.einsum('nkr,nr->nk', np.linalg.pinv(scaled, rcond=RANK_TOLERANCE),
+                             q_base)
+
+
+def _base_state(pose: Any, velocity: Any, acceleration: Any, n: int, single: bool
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    out = []
+    for label, value, size in (('base_pose', pose, 7), ('base_velocity', velocity, 6),
+                               ('base_acceleration', acceleration, 6)):
+        if value is None:
+            if label == 'base_pose':
+                raise SetpointError('base_pose: required, (x, y, z, qx, qy, qz, qw)')
+            value = np.zeros(size)
+        try:
+            array = np.array(value, dtype=float)
+        except (TypeError, ValueError):
+            raise SetpointError(f'{label}: {size} numbers per sample, got {value!r}') from None
+        if array.shape != ((size,) if single else (n, size)):
+            raise SetpointError(f'{label}: shape {(size,) if single else (n, size)} expected '
+                                f'(as theta), got {array.shape}')
+        array = array.reshape(n, size)
+        bad = np.flatnonzero(~np.isfinite(array).all(axis=1))
+        if bad.size:
+            raise SetpointError(f'{"" if single else f"sample {bad[0]}: "}{label} is not '
+                                f'finite: {array[bad[0]].tolist()}')
+        out.append(array)
+    norms = np.linalg.norm(out[0][:, 3:], axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-6)
+    if bad.size:
+        raise SetpointError(f'{"" if single else f"sample {bad[0]}: "}base_pose: the '
+                            f'quaternion (qx, qy, qz, qw) must be a unit one, its norm is '
+                            f'{norms[bad[0]]:.9g}')
+    return out[0], out[1], out[2]
+
+
+def _accelerations(theta_ddot: Any, shape: tuple[int, ...]) -> np.ndarray:
+    if theta_ddot is None:
+        return np.zeros(shape)
+    try:
+        qdd = np.array(theta_ddot, dtype=float).reshape(shape)
+    except (TypeError, ValueError):
+        raise SetpointError(f'theta_ddot: one acceleration per active joint and sample '
+                            f'{shape}, got {theta_ddot!r}') from None
+    if not np.isfinite(qdd).all():
+        raise SetpointError('theta_ddot is not finite')
+    return qdd
+
+
+def _rotation(quaternion: np.ndarray) -> np.ndarray:
+    """(N, 9) row-major world-from-base rotations of unit quaternions (qx, qy, qz, qw)."""
+    x, y, z, w = quaternion.T
+    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+                     2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+                     2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)
+
+
+def _rows(values: Sequence[Any], n: int) -> np.ndarray:
+    """A list of lanes -> (N, len)."""
+    return np.array([np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in values]
+                    ).reshape(len(values), n).T.copy()
+
+
+def _maps(rows: Sequence[Sequence[Any]], n: int) -> np.ndarray:
+    """Rows of lanes (r, k) -> (N, r, k)."""
+    r, k = len(rows), len(rows[0]) if rows else 0
+    out = np.zeros((n, r, k))
+    for i, row in enumerate(rows):
+        for j, value in enumerate(row):
+            out[:, i, j] = value
+    return out
+
+
+def _weights(contacts: Sequence[Any], given: Any) -> np.ndarray:
+    """Per wrench component, its weight: ``given`` per contact (a dict by name or a list in
+    the contacts' order) of ``size`` positive numbers, or one; all 1 by default."""
+    out = []
+    for k, contact in enumerate(contacts):
+        value = None if given is None else given.get(contact.name) if isinstance(given, dict) \
+            else given[k]
+        w = np.ones(contact.size) if value is None else np.broadcast_to(
+            np.array(value, dtype=float), (contact.size,)) if np.size(value) in (
+            1, contact.size) else None
+        if w is None or not (np.isfinite(w) & (w > 0.0)).all():
+            raise SetpointError(f"wrench_weights of '{contact.name}': {contact.size} positive "
+                                f'numbers (or one), got {value!r}')
+        out.append(w)
+    return np.concatenate(out) if out else np.zeros(0)
