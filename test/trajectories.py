@@ -73,6 +73,18 @@ DRIVERS = {
                             'motor_knee': _law(0.0, 0.0, [(0.0, 0.4, PI)]),
                             'motor_ankle': _law(0.0, 0.0, [(0.06, 0.0, PI)]),
                             'motor_shin': _law(0.023090923393947464, 0.0, [(0.25, 0.0, PI)])},
+    # both legs of the biped step a little: hips swing, knees bend, the ankle motors tilt
+    # the feet through their rods (about the pose its config pins)
+    'digit_biped.yaml': {
+        **{f'motor_hip_{axis}{side}': _law(0.0, 0.0, [(amplitude, 0.0, PI)])
+           for side in ('', '_left') for axis, amplitude in (('x', 0.04), ('z', 0.03),
+                                                             ('y', 0.1))},
+        'motor_knee': _law(0.0076565807143723335, 0.0, [(0.0, 0.15, PI)]),
+        'motor_knee_left': _law(-0.02297896219886896, 0.0, [(0.0, 0.15, PI)]),
+        'motor_shin1': _law(0.8277222835522381, 0.0, [(0.05, 0.0, PI)]),
+        'motor_shin2': _law(-0.8264383887084211, 0.0, [(-0.05, 0.0, PI)]),
+        'motor_shin1_left': _law(0.8288705190389682, 0.0, [(0.04, 0.0, PI)]),
+        'motor_shin2_left': _law(-0.8275863083840398, 0.0, [(-0.03, 0.0, PI)])},
     # the knee bends and straightens through its four-bar
     'four_bar_knee.yaml': {'motor_knee': _law(0.0, 0.0, [(0.5, 0.0, PI)])},
     # both motors together (pitch) with some of them against each other (roll)
@@ -307,4 +319,4 @@ for _twin, _original in TWINS.items():
 #: (test/description/test_urdf.py and test_loop_closure_file.py check those against
 #: Pinocchio's own URDF parser)
 NOT_FOR_ORACLE = set(TWINS) | {'crank_rocker_urdf.yaml', 'five_bar_robot.yaml',
-                                'talos_like_leg.yaml', 'parallel_ankle.yaml'}
+                                'talos_like_leg.yaml', 'parallel_ankle.yaml', 'digit_biped.yaml'}

@@ -288,3 +288,28 @@ def test_standing_on_one_foot_equals_the_robot_fixed_at_that_foot(biped):
     expected = cog_id_ros.InverseDynamics(fixed).torques(theta0, thd, thdd)
     np.testing.assert_allclose(got.efforts, expected, atol=1e-5 * np.abs(expected).max())
     assert np.abs(got.base_wrench).max() < 1e-9 * np.abs(expected).max()
+
+
+@pytest.mark.parametrize('batch', [False, True])
+def test_backends_agree_to_the_bit(biped, batch):
+    """The whole-body kernel traced into Python and compiled into C gives the lane code's
+    numbers (native/whole_body_kernel.py), one sample and a batch."""
+    samples = [state(biped, k) for k in range(3)]
+    results = {}
+    for backend in ('reference', 'python', 'native'):
+        try:
+            solver = cog_id_ros.InverseDynamics(biped, backend=backend)
+        except MechanismConfigError:       # no C compiler here
+            continue
+        if batch:
+            out = solver.whole_body_torques(*[np.array(c) for c in zip(*samples)],
+                                            contacts=['left_toe', 'right_foot'])
+        else:
+            out = [solver.whole_body_torques(*s, contacts=['left_toe', 'right_foot'])
+                   for s in samples]
+            out = [np.concatenate([o.efforts, o.base_wrench, *o.wrenches.values()]) for o in out]
+        results[backend] = out if not batch else np.concatenate(
+            [out.efforts, out.base_wrench, *out.wrenches.values()], axis=1)
+    assert len(results) >= 2
+    for backend, values in results.items():
+        np.testing.assert_array_equal(values, results['reference'], err_msg=backend)

@@ -95,6 +95,13 @@ class Mechanism:
     #: read by couplings.read_couplings: (follower, leader, multiplier, offset) per coupled
     #: joint (joints.<name>.mimic)
     couplings: list
+    #: read by floating_base.read_floating_base: the base free in space, its mass
+    #: properties, the contacts (name -> floating_base.Contact)
+    floating_base: bool
+    base_mass: float
+    base_com: tuple
+    base_inertia: tuple
+    contacts: dict
 
     def __init__(self, params: Mapping[str, Any], _chains: Iterable[SphericalChain] = ()) -> None:
         reader = ParameterReader(params)

@@ -1,7 +1,8 @@
 """Whole-body inverse dynamics of a floating robot: efforts, contact wrenches, base wrench.
 
-    pose and basis at theta            poses.py (the closed pose, warm-started, as torques)
-    Q_b, tau, A, C                     dynamics/floating_base.py (the equations)
+    the closed pose at theta           sample_solve.py, batch.py (warm-started, as torques)
+    Q_b, tau, A, C                     dynamics/floating_base.py (the equations), run by
+                                       native/whole_body_kernel.py on the solver's backend
     w = argmin sum_k weight_k w_k^2    among the wrenches with A w = Q_b     contact_wrenches
         (least squares in A w - Q_b where no wrench makes the motion: the rest is left)
     base_wrench = Q_b - A w,  efforts = tau - C w
@@ -15,9 +16,9 @@ from typing import Any, NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from ..dynamics.floating_base import contact_maps, whole_body_forces
 from ..errors import MechanismConfigError, SetpointError
-from ..linalg.lanes import columns
+from ..native.whole_body_kernel import whole_body_kernel
+from .inputs import check_values, out_of_range, setpoints
 
 #: relative size below which a direction of the contact map counts as missing (pinv cutoff)
 RANK_TOLERANCE = 1e-10
@@ -41,6 +42,48 @@ def whole_body_torques(solver: Any, base_pose: Any, base_velocity: Any, base_acc
     if not mech.floating_base:
         raise MechanismConfigError('mechanism.floating_base', 'whole_body_torques needs a '
                                                               'floating base: set it true')
+    solved = mech.solver_mechanism
+    chosen = _chosen(solved, contacts)
+    target, qd, qdd, single = setpoints(solved, solver._serial.wrapping, theta, theta_dot,
+                                        theta_ddot, solver.check_position_limits)
+    n = 1 if single else len(target)
+    pose, velocity, acceleration = _base_state(base_pose, base_velocity, base_acceleration, n,
+                                               single)
+    rotation = _rotation(pose[:, 3:])
+    base = np.concatenate([velocity, acceleration], axis=1)
+    kernel = whole_body_kernel(solved, solver.backend)
+    if single:
+        state = solver._serial.solve(solver._state, target)[1]
+        record = _as_rows(kernel.one(state[0], qd, qdd, base[0].tolist(), rotation[0].tolist()))
+    else:
+        _, errors = check_values(solved, solver._serial.wrapping, target, qd, qdd, False)
+        if errors:
+            raise errors[min(errors)]
+        with np.errstate(all='ignore'):
+            _, positions, _, _, state = solver._batch.positions(solver._state, target, 'raise')
+        record = kernel.many(positions, qd, qdd, base, rotation)
+    k = sum(contact.size for contact in solved.contacts.values())
+    picked = _columns(solved, chosen)
+    a_map = np.asarray(record.base_map).reshape(n, 6, k)[:, :, picked]
+    c_map = np.asarray(record.joint_map).reshape(n, -1, k)[:, :, picked]
+    q_base, tau = np.asarray(record.base_forces), np.asarray(record.torques)
+    w = contact_wrenches(a_map, q_base, _weights(chosen, wrench_weights))
+    efforts = tau - np.einsum('nmk,nk->nm', c_map, w)
+    base_wrench = q_base - np.einsum('nrk,nk->nr', a_map, w)
+    _check_finite(np.concatenate([efforts, base_wrench, w], axis=1), qd, single)
+    solver._state = state
+    wrenches, start = {}, 0
+    for contact in chosen:
+        part = w[:, start:start + contact.size]
+        wrenches[contact.name] = part[0] if single else part
+        start += contact.size
+    if single:
+        return WholeBodyEfforts(efforts[0], wrenches, base_wrench[0])
+    return WholeBodyEfforts(efforts, wrenches, base_wrench)
+
+
+def _chosen(mech: Any, contacts: Optional[Sequence[str]]) -> list[Any]:
+    """The Contacts named (all of them for None), checked."""
     names = list(mech.contacts) if contacts is None else list(contacts)
     for name in names:
         if name not in mech.contacts:
@@ -48,36 +91,30 @@ def whole_body_torques(solver: Any, base_pose: Any, base_velocity: Any, base_acc
                                 f"({', '.join(mech.contacts) or 'none'})")
     if len(set(names)) != len(names):
         raise SetpointError(f'contacts: a contact named twice in {names}')
-    solved = mech.solver_mechanism
-    at = solver._poses.at(solver._state, theta, theta_dot, solved=True)
-    n = 1 if at.single else len(at.qd)
-    pose, velocity, acceleration = _base_state(base_pose, base_velocity, base_acceleration, n,
-                                               at.single)
-    qdd = _accelerations(theta_ddot, at.qd.shape)
-    lanes = (lambda a: a[0].tolist()) if at.single else columns
-    rotation = lanes(_rotation(pose[:, 3:]))
-    v, dv = lanes(velocity), lanes(acceleration)
-    base = (tuple(v[:3]), tuple(v[3:]), tuple(dv[:3]), tuple(dv[3:]))
-    with np.errstate(all='ignore'):
-        base_rows, tau_rows, cogs, jac = whole_body_forces(
-            solved, at.pose, at.basis, at.rates, lanes(qdd), base, rotation, at.ops)
-        chosen = [solved.contacts[name] for name in names]
-        a_rows, c_rows = contact_maps(solved, at.pose, cogs, jac, chosen, rotation)
-    q_base, tau = _rows(base_rows, n), _rows(tau_rows, n)
-    a_map, c_map = _maps(a_rows, n), _maps(c_rows, n)
-    weights = _weights(chosen, wrench_weights)
-    w = contact_wrenches(a_map, q_base, weights)
-    efforts = tau - np.einsum('nmk,nk->nm', c_map, w)
-    base_wrench = q_base - np.einsum('nrk,nk->nr', a_map, w)
-    solver._moved_to(at, np.concatenate([efforts, base_wrench, w], axis=1))
-    wrenches, start = {}, 0
-    for contact in chosen:
-        part = w[:, start:start + contact.size]
-        wrenches[contact.name] = part[0] if at.single else part
+    return [mech.contacts[name] for name in names]
+
+
+def _columns(mech: Any, chosen: Sequence[Any]) -> list[int]:
+    """The kernel's map columns of the chosen contacts' components, in their order."""
+    first, start = {}, 0
+    for contact in mech.contacts.values():
+        first[contact.name] = start
         start += contact.size
-    if at.single:
-        return WholeBodyEfforts(efforts[0], wrenches, base_wrench[0])
-    return WholeBodyEfforts(efforts, wrenches, base_wrench)
+    return [first[c.name] + i for c in chosen for i in range(c.size)]
+
+
+def _as_rows(record: Any) -> Any:
+    """A one-sample record (lists) as a record of (1, k) arrays."""
+    return type(record)(*(np.array([list(field)], dtype=float) for field in record))
+
+
+def _check_finite(values: np.ndarray, qd: Any, single: bool) -> None:
+    """SetpointError (out_of_range) naming the first sample whose outputs are not finite."""
+    bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
+    if bad.size:
+        k = int(bad[0])
+        rates = list(qd) if single else np.asarray(qd)[k].tolist()
+        raise out_of_range(rates, [0.0] * len(rates), None if single else k)
 
 
 def contact_wrenches(a_map: np.ndarray, q_base: np.ndarray, weights: np.ndarray) -> np.ndarray:
