@@ -8,6 +8,7 @@ adds joint space to it), a thin face over the modules that do the work.
 
 Successive calls keep the assembly branch: each is warm-started from the previous one.
 """
+import itertools
 import math
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast
 
@@ -231,7 +232,7 @@ class ActuatorSpaceSolver:
         solved_rows = self._solved_rows(rows) if with_rates and rows is not None else None
         if solved_rows is not None:
             s = _basis_rows(state[1], self._solved.primary, solved_rows, len(target))
-            if not all(math.isfinite(x) for row in s for x in row):
+            if not math.isfinite(sum(map(sum, s))):      # (a NaN or inf anywhere)
                 raise out_of_range(list(target), [], None)
         elif with_rates:
             solved = active_velocity_map(self._solved, state[1], sp.ScalarOps)
@@ -249,7 +250,7 @@ class ActuatorSpaceSolver:
     def rate_scale(self) -> float:
         """The size (Frobenius norm) of the velocity basis at the pose the solver is at:
         every coordinate's rate per unit rate of the primary actuators, over all of them."""
-        return math.sqrt(sum(x * x for row in self._state[1] for x in row))
+        return math.hypot(*itertools.chain.from_iterable(self._state[1]))
 
     def _solved_rows(self, rows: Sequence[int]) -> Optional[List[int]]:
         """The solver's coordinates of joints ``rows`` (mechanism.joints indices) where each

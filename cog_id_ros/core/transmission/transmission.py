@@ -26,6 +26,7 @@ sets. Every call keeps each solver's assembly branch (warm starts), a batch foll
 per-sample rule.
 """
 import math
+import operator
 from typing import Any, Literal, Optional, cast
 
 import numpy as np
@@ -156,12 +157,16 @@ class Transmission:
         (:meth:`_inverse_at`); N samples: from the joints' solver at each q."""
         if _one(theta) and not self.redundant:
             jac = np.array(self._rows_at(self.actuators, theta, self._q), dtype=float)
-            least = np.linalg.svd(jac, compute_uv=False)[-1]
+            try:
+                inverse = np.linalg.inv(jac)
+            except np.linalg.LinAlgError:
+                inverse = None
             # seen_condition of the joint space is at most scale / least (the basis's
-            # primary columns are unit rates): well within the bound, K = J^-1 at once
-            if least > 0.0 and self.actuators.rate_scale() / least <= \
-                    self.mechanism.max_condition_number:
-                return _times(np.linalg.inv(jac).T.tolist(), tau_m)
+            # primary columns are unit rates), and 1 / least = |J^-1|_2 <= |J^-1|_F:
+            # well within the bound, K = J^-1 at once
+            if inverse is not None and self.actuators.rate_scale() * math.sqrt(
+                    float((inverse * inverse).sum())) <= self.mechanism.max_condition_number:
+                return _times(inverse.T.tolist(), tau_m)
         if _one(theta):
             with self._named():
                 k = self._inverse_at(_rate_map(self.actuators, theta))
@@ -283,7 +288,7 @@ def _times(rows: Any, vector: ArrayLike) -> np.ndarray:
     if not all(map(math.isfinite, v)):
         raise SetpointError('velocities and efforts must be finite, got '
                             f'{v}', reason='non_finite')
-    return np.array([sum(a * b for a, b in zip(row, v)) for row in rows], dtype=float)
+    return np.array([sum(map(operator.mul, row, v)) for row in rows], dtype=float)
 
 
 def _apply(matrices: np.ndarray, vectors: ArrayLike) -> np.ndarray:
