@@ -6,6 +6,9 @@ cog_id_torques:
                      torques, summary and plot out)
   skipped_rows.py    rows left unsolved before solving: jumps, pieces too short to estimate
   solving.py         the samples solved in chunks; a refused row named, or skipped
+  floating_base.py   a floating-base robot: --contacts, whole_body_torques per chunk, the
+                     wrench columns
+  base_samples.py    its base columns read and checked, absent rates estimated
   summary.py         peak, RMS and power per joint, as a table or JSON
   outputs.py         the output paths checked first, the files written together at the end
   progress.py        the progress bar (cog_id_simulate's too)

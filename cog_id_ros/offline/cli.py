@@ -1,7 +1,7 @@
 """cog_id_torques: actuator torques of a closed-link mechanism along a CSV trajectory.
 
     cog_id_torques --params-file config/X.yaml --input traj.csv --output torques.csv \
-        [--plot torques.png] [--space joint]
+        [--plot torques.png] [--space joint] [--contacts NAME,NAME]
 
 The run, step by step (:func:`run`): the paths checked (:mod:`cog_id_ros.offline.outputs`),
 the mechanism loaded, the trajectory read (:mod:`cog_id_ros.offline.trajectory_io`), angles
@@ -11,8 +11,10 @@ unwrapped and jumps found (:mod:`cog_id_ros.offline.jumps`,
 (:mod:`cog_id_ros.offline.solving`), the efforts and the plot written atomically, and a
 summary printed (:mod:`cog_id_ros.offline.summary`). With ``--space joint`` the input
 is a motion of ``mechanism.joint_space`` and the output still the motors' torques
-(:mod:`cog_id_ros.offline.joint_space_solving`). No ROS import: the tool runs wherever
-numpy does.
+(:mod:`cog_id_ros.offline.joint_space_solving`). A floating-base mechanism also reads the
+base's columns and writes the contact wrenches and the base wrench
+(:mod:`cog_id_ros.offline.floating_base`). No ROS import: the tool runs wherever numpy
+does.
 """
 
 import argparse
@@ -25,7 +27,9 @@ import numpy as np
 
 from ..core.native.kernels import BACKENDS
 from . import (
+    base_samples,
     derivatives,
+    floating_base,
     joint_space_solving,
     jumps,
     outputs,
@@ -76,6 +80,19 @@ input CSV (comma-separated, header row first):
   <name>.position|velocity|acceleration column whose <name> is not a joint of the
   mechanism is an error; any other column is ignored with a note.
 
+floating base (mechanism.floating_base true), also the base's columns:
+  base.x base.y base.z     required: the base's origin in the world frame (m)
+  base.qx base.qy base.qz base.qw
+                           required: its orientation, a unit quaternion, world from base
+  base.vx base.vy base.vz base.wx base.wy base.wz
+                           optional, all six or none: the base's velocity in the base
+                           frame (m/s, rad/s); estimated from the pose when absent
+  base.dvx base.dvy base.dvz base.dwx base.dwy base.dwz
+                           optional, all six or none: the time derivatives of those
+                           (m/s^2, rad/s^2); estimated as the joints' accelerations are
+  --contacts names the contacts touching the ground (default: all of mechanism.contacts).
+  A fixed-base mechanism refuses base columns (exit 1) and --contacts (exit 2).
+
 derivative estimate (absent columns; needs at least {derivatives.STENCIL} rows):
 {textwrap.fill(derivatives.SCHEME + '.', 80, initial_indent='  ', subsequent_indent='  ')}
 
@@ -93,7 +110,11 @@ jumps and wrapped angles: an active position that moves by more than --max-step
   previous row's (prismatic columns untouched) and says how many rows it shifted.
 
 output CSV: time and <joint>.effort per active joint (N m or N), every value at
-  full precision; the cells of a row skipped by --skip-invalid are empty.
+  full precision; the cells of a row skipped by --skip-invalid are empty. A floating
+  base adds per contact <contact>.fx .fy .fz .mx .my .mz (a 3d contact: .fx .fy .fz; N,
+  N m; world axes, at the contact point, applied by the ground to the robot), then
+  base_wrench.fx .fy .fz .mx .my .mz (what the world must still apply at the base: base
+  frame, at its origin).
   --output and --plot: a symbolic link is written through (its target is replaced
   atomically, the link stays); a FIFO, device or socket is refused (exit 2).
 
@@ -108,13 +129,15 @@ summary (stdout; --json for the same as JSON): per active joint the peak |effort
 
 exit status:
   {EXIT_OK}  success (also when --skip-invalid skipped rows; they are listed on stderr)
-  {EXIT_INPUT}  the trajectory was rejected: missing/duplicate/unknown column, ragged row,
+  {EXIT_INPUT}  the trajectory was rejected: missing/duplicate/unknown column (base columns
+     for a fixed base), a base quaternion that is not a unit one, ragged row,
      non-numeric cell, NaN, infinity or a number beyond a double, time not strictly
      increasing, time steps unusable for an estimate, or (without --skip-invalid) a
      jump beyond --max-step or a sample that cannot be solved (the loop cannot close,
      the mechanism is singular, the torques would overflow)
   {EXIT_USAGE}  command line: bad option, input not readable, output directory missing,
-     output is a FIFO/device/socket
+     output is a FIFO/device/socket, --contacts naming no contact of the mechanism or
+     given for a fixed base, --space joint with a floating base
   {EXIT_PARAMS}  the parameter file cannot be read or honoured
   {EXIT_WRITE}  writing an output file failed (the message names --output or --plot)
   {EXIT_INTERNAL} an internal error (a bug; one line, set {TRACEBACK_ENV}=1 for the traceback)
@@ -146,6 +169,12 @@ def build_parser():
                              "a controller commands); the output is the motors' torques "
                              "either way, the exact ones (the linkage's inertia and gravity "
                              'included; docs/transmission.md)')
+    parser.add_argument('--contacts', metavar='NAMES',
+                        help='a floating-base mechanism (mechanism.floating_base): the '
+                             'contacts touching the ground, comma-separated names of '
+                             'mechanism.contacts (default: all of them; none: no contact, the '
+                             'whole residual is the base wrench); their wrenches are written '
+                             'after the efforts')
     parser.add_argument('--json', action='store_true',
                         help='print the summary as one JSON object instead of a table')
     parser.add_argument('--skip-invalid', action='store_true',
@@ -218,13 +247,17 @@ def run(args, stdout, stderr, signals=None):
     mech, solver = load_mechanism(args)
     active = list(mech.active_joints)
     motor_rates = None
+    contacts = floating_base.contact_names(args, mech)     # None: a fixed base
     if getattr(args, 'space', 'actuator') == 'joint':
         solver = joint_space_solving.JointSpaceSolver(
             joint_space_solving.transmission_of(mech, solver, args.params_file))
-    traj, (q, qd, qdd, estimated), keep, jump_skips, unwrapped = _read(
+    traj, (q, qd, qdd, estimated), keep, jump_skips, unwrapped, base = _read(
         args, solver.mechanism, stderr)
     if solver.mechanism is not mech:
         motor_rates = np.zeros((len(traj), len(active)))
+    if contacts is not None:        # a floating base: the base's samples beside the motors'
+        solver = floating_base.WholeBodySolver(solver, contacts)
+        q, qd, qdd = solver.pack(q, qd, qdd, base)
     n = len(traj)
     to_solve = int(np.count_nonzero(keep))
     wanted = ProgressBar.wanted(to_solve, stderr, args.no_progress)
@@ -241,8 +274,12 @@ def run(args, stdout, stderr, signals=None):
     elapsed = _time.perf_counter() - started
     summary = build_summary(args, mech, traj, estimated, efforts, valid, qd, skipped, elapsed,
                             unwrapped)
+    floating = contacts is not None
+    if floating:
+        summary['contacts'] = contacts
     outputs.write_outputs(args, signals, traj, efforts, valid, active, summary, mech, skipped,
-                          plot_format)
+                          plot_format, solver.extra_columns if floating else (),
+                          solver.vertical_forces(efforts) if floating else None)
     summary['elapsed_seconds'] = _time.perf_counter() - started
     summary['samples_per_second'] = n / summary['elapsed_seconds']
     _print_summary(args, summary, stdout, stderr)
@@ -251,20 +288,20 @@ def run(args, stdout, stderr, signals=None):
 
 def _read(args, mech, stderr):
     """The trajectory of --input, its samples ``(q, qd, qdd, estimated columns)``, the rows
-    to solve (bool mask), the [Skip] of the jumps and the unwrapped columns (or None); the
-    notes on stderr. ToolError naming the row and column of a bad trajectory. ``mech``'s
-    active joints name the columns (--space joint: the mechanism driven at its joint
-    space)."""
+    to solve (bool mask), the [Skip] of the jumps, the unwrapped columns (or None) and a
+    floating base's samples (base_samples.BaseSamples, or None); the notes on stderr.
+    ToolError naming the row and column of a bad trajectory. ``mech``'s active joints name
+    the columns (--space joint: the mechanism driven at its joint space)."""
     active = list(mech.active_joints)
     kinds = mech.active_kinds
-    unwrapped = None
+    unwrapped = base = None
     try:
         # every joint of the mechanism, those without a coordinate too (their columns are
         # ignored like any passive joint's, not called unknown)
         traj = trajectory_io.read_trajectory(
             args.input, list(mech.joints) + list(mech.closure_joints), active,
             role=(joint_space_solving.ROLE if getattr(args, 'space', 'actuator') == 'joint'
-                  else 'active joint'))
+                  else 'active joint'), **base_samples.reading(args.input, mech))
         for note in traj.notes:
             print(f'{PROG}: note: {args.input}: {note}', file=stderr)
         if getattr(args, 'unwrap', False):
@@ -276,9 +313,14 @@ def _read(args, mech, stderr):
                 file=stderr)
         keep, jump_skips = skipped_rows.check_jumps(args, mech, traj, active)
         if jump_skips:
-            jump_skips += skipped_rows.short_pieces(traj, active, keep)
+            jump_skips += skipped_rows.short_pieces(
+                traj, active, keep, base_samples.VELOCITY + base_samples.ACCELERATION
+                if mech.floating_base else ())
         q, qd, qdd, estimated = samples.setpoints(
             traj, active, keep if jump_skips else None)
+        if mech.floating_base:
+            base = base_samples.setpoints(traj, keep if jump_skips else None)
+            estimated += base.estimated
     except TrajectoryError as exc:
         raise ToolError(str(exc), EXIT_INPUT) from None
     except OSError as exc:
@@ -287,7 +329,7 @@ def _read(args, mech, stderr):
     if estimated:
         print(f'{PROG}: note: estimating ' + ', '.join(estimated)
               + ' by finite differences (see --help)', file=stderr)
-    return traj, (q, qd, qdd, estimated), keep, jump_skips, unwrapped
+    return traj, (q, qd, qdd, estimated), keep, jump_skips, unwrapped, base
 
 
 def _print_summary(args, summary, stdout, stderr):

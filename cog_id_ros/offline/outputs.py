@@ -76,8 +76,11 @@ class _Outputs:
 
 
 def write_outputs(args, signals, traj, efforts, valid, active, summary, mech, skipped,
-                   plot_format):
-    """Write the CSV and the plot to temporary files, then rename both (signals held back)."""
+                   plot_format, extra_columns=(), forces=None):
+    """Write the CSV and the plot to temporary files, then rename both (signals held back).
+    ``extra_columns``: the names of the columns of ``efforts`` after the active joints' (a
+    floating base's wrenches; not plotted); ``forces``: {contact: vertical force (N,)} drawn
+    in a panel of their own."""
     n = len(traj)
     outputs = _Outputs()
     current = ('--output', args.output)
@@ -87,7 +90,8 @@ def write_outputs(args, signals, traj, efforts, valid, active, summary, mech, sk
             outputs.add('--output', args.output, tmp_csv,
                         atomic_files.output_target(args.output))
             with open(tmp_csv, 'w', encoding='utf-8', newline='') as f:
-                for block in trajectory_io.format_efforts(traj.time, efforts, valid, active):
+                for block in trajectory_io.format_efforts(traj.time, efforts, valid, active,
+                                                          extra_columns=extra_columns):
                     f.write(block)
             if args.plot:
                 from . import plotting
@@ -96,11 +100,12 @@ def write_outputs(args, signals, traj, efforts, valid, active, summary, mech, sk
                 outputs.add('--plot', args.plot, tmp_plot, atomic_files.output_target(args.plot))
                 try:
                     plotting.plot_efforts(
-                        tmp_plot, traj.time, efforts, valid, active, summary['joints'],
+                        tmp_plot, traj.time, efforts[:, :len(active)], valid, active,
+                        summary['joints'],
                         title=mech.name, units=[j['unit'] for j in summary['joints']],
                         subtitle=f'{os.path.basename(args.input)}: {n:,} samples'
                                  + (f', {len(skipped):,} skipped' if skipped else ''),
-                        fmt=plot_format)
+                        fmt=plot_format, forces=forces)
                 except (OSError, MemoryError):
                     raise
                 except Exception as exc:     # matplotlib refusing the data

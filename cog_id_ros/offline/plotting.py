@@ -32,16 +32,39 @@ def _quantity(unit):
 
 
 def plot_efforts(path, time, efforts, valid, joints, stats, title, units, subtitle=None,
-                 fmt='png'):
+                 fmt='png', forces=None):
     """Draw and save the effort plot (see :func:`_plot`); when matplotlib cannot lay out
     the time axis (times near 1e308 s overflow its tick computation), the curves are
-    drawn against the row number instead, and the axis label says why."""
+    drawn against the row number instead, and the axis label says why. ``forces``
+    (a floating base): {contact: vertical force (N,)}, one more panel under the efforts."""
     with warnings.catch_warnings(), np.errstate(all='ignore'):
         warnings.simplefilter('ignore', RuntimeWarning)    # matplotlib's, on extreme data
         try:
-            _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, False)
+            _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, False,
+                  forces)
         except (ValueError, OverflowError, FloatingPointError):
-            _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, True)
+            _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, True,
+                  forces)
+
+
+def _contact_panel(ax, time, forces, valid, marker):
+    """The contacts' vertical forces (N, world z) in one panel; skipped rows are gaps."""
+    ax.axhline(0.0, color='0.75', lw=0.8, zorder=0)
+    for k, (name, fz) in enumerate(forces.items()):
+        values = np.asarray(fz, dtype=float)
+        factor, scaled = _scale(np.where(valid, values, 0.0))
+        ax.plot(time, np.where(valid, values, np.nan) * factor, color=f'C{k % 10}', lw=1.4,
+                marker=marker, ms=4, label=f'{name} fz{scaled}')
+    if not forces:
+        ax.text(0.5, 0.5, 'no contact (--contacts none)', transform=ax.transAxes,
+                ha='center', va='center', color='0.4')
+    ax.set_ylabel('vertical force  [N]')
+    ax.grid(True, color='0.9', lw=0.6)
+    if forces:
+        ax.legend(loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize='small',
+                  frameon=False, borderaxespad=0.0)
+    ax.set_title('contacts: vertical force fz (world z, on the robot)', loc='left',
+                 fontsize='medium', fontweight='bold')
 
 
 def _scale(values):
@@ -55,7 +78,8 @@ def _scale(values):
     return 10.0 ** -power, f' \u00d7 1e{power}'
 
 
-def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, by_row):
+def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt, by_row,
+          forces=None):
     """Draw and save the effort plot.
 
     ``time`` (N,), ``efforts`` (N, M), ``valid`` (N,) bool (False: skipped sample, drawn
@@ -64,7 +88,7 @@ def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt
     ``rms_effort`` (values ``None`` when no sample of the joint was solved), ``units``
     M unit strings (``'N m'`` or ``'N'``), ``title`` the figure title (the mechanism
     name), ``subtitle`` an optional second line. ``path`` may be a temporary name:
-    ``fmt`` says the format.
+    ``fmt`` says the format; ``forces``: see :func:`plot_efforts`.
     """
     from matplotlib.figure import Figure
 
@@ -74,8 +98,9 @@ def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt
     efforts = np.asarray(efforts, dtype=float).reshape(time.size, -1)
     valid = np.ones(time.size, bool) if valid is None else np.asarray(valid, bool)
     n_joints = efforts.shape[1]
-    fig = Figure(figsize=(10.0, 1.3 + 2.7 * n_joints), layout='constrained')
-    axes = fig.subplots(n_joints, 1, sharex=True, squeeze=False)[:, 0]
+    panels = n_joints + (forces is not None)
+    fig = Figure(figsize=(10.0, 1.3 + 2.7 * panels), layout='constrained')
+    axes = fig.subplots(panels, 1, sharex=True, squeeze=False)[:, 0]
     skipped = ~valid
     t_skipped = time[skipped]
     marker = '.' if time.size <= _MARKER_LIMIT else None
@@ -105,12 +130,15 @@ def _plot(path, time, efforts, valid, joints, stats, title, units, subtitle, fmt
         ax.legend(loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize='small',
                   frameon=False, borderaxespad=0.0)
         ax.set_title(f'{joint}', loc='left', fontsize='medium', fontweight='bold')
+    if forces is not None:
+        _contact_panel(axes[-1], time, forces, valid, marker)
     axes[-1].set_xlabel('row  (the times are too large to draw an axis of)' if by_row
                         else 'time  [s]')
     if time.size:
         axes[-1].set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
     kinds = sorted({_quantity(u)[0] for u in units})
-    head = f"{title}: actuator {' and '.join(k + 's' for k in kinds)}"
+    head = f"{title}: actuator {' and '.join(k + 's' for k in kinds)}" + (
+        '' if forces is None else ', contact forces')
     if subtitle:
         head += '\n' + subtitle
     figure_text.suptitle(fig, head, 12)       # 'large', wrapped to the figure's width

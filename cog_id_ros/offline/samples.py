@@ -59,21 +59,8 @@ def setpoints(traj: Trajectory, active_joints: Sequence[str], keep: np.ndarray |
     qdd = np.zeros((n, m))
     need = [joint_column(j, f) for j in active_joints for f in ('velocity', 'acceleration')
             if joint_column(j, f) not in traj.columns]
-    for rows in pieces if need else []:
-        if rows.size >= derivatives.STENCIL:
-            continue
-        if keep is None:
-            raise TrajectoryError(
-                traj.path,
-                f'absent, and estimating it needs at least {derivatives.STENCIL} rows '
-                f'(the file has {n}); add the column', column=need[0])
-        raise TrajectoryError(
-            traj.path,
-            f'absent, and estimating it needs at least {derivatives.STENCIL} consecutive rows; '
-            f'rows {int(rows[0]) + 1}..{int(rows[-1]) + 1} are {rows.size} between skipped rows',
-            row=int(rows[0]) + 1, column=need[0])
-    for rows in pieces if need else []:
-        _check_steps(traj.path, traj.time[rows], rows, need[0])
+    if need:
+        check_pieces(traj, pieces, keep is None, need[0])
     estimated = []
     for k, joint in enumerate(active_joints):
         pos = traj.columns[joint_column(joint, 'position')]
@@ -98,6 +85,27 @@ def setpoints(traj: Trajectory, active_joints: Sequence[str], keep: np.ndarray |
             qd[rows, k] = v
             qdd[rows, k] = a
     return q, qd, qdd, estimated
+
+
+def check_pieces(traj: Trajectory, pieces: list[np.ndarray], whole: bool, column: str) -> None:
+    """TrajectoryError unless every piece of kept rows (``whole``: the one piece is the
+    file) can be differentiated to estimate the absent ``column``: enough rows, usable
+    time steps."""
+    for rows in pieces:
+        if rows.size >= derivatives.STENCIL:
+            continue
+        if whole:
+            raise TrajectoryError(
+                traj.path,
+                f'absent, and estimating it needs at least {derivatives.STENCIL} rows '
+                f'(the file has {len(traj)}); add the column', column=column)
+        raise TrajectoryError(
+            traj.path,
+            f'absent, and estimating it needs at least {derivatives.STENCIL} consecutive rows; '
+            f'rows {int(rows[0]) + 1}..{int(rows[-1]) + 1} are {rows.size} between skipped rows',
+            row=int(rows[0]) + 1, column=column)
+    for rows in pieces:
+        _check_steps(traj.path, traj.time[rows], rows, column)
 
 
 def _check_steps(path, time, rows, column):

@@ -65,12 +65,14 @@ def check_jumps(args, mech, traj, active):
     return keep, skipped
 
 
-def short_pieces(traj, active, keep):
+def short_pieces(traj, active, keep, more=()):
     """With derivatives to estimate, rows left in pieces of fewer than STENCIL rows between
     skipped stretches (see samples.kept_pieces) cannot be estimated: skip them too
-    (reason 'jump'), updating ``keep``."""
+    (reason 'jump'), updating ``keep``. ``more``: other columns estimated when absent (a
+    floating base's velocities and accelerations)."""
     fields = ('velocity', 'acceleration')
-    if all(trajectory_io.joint_column(j, f) in traj.columns for j in active for f in fields):
+    if all(trajectory_io.joint_column(j, f) in traj.columns for j in active for f in fields) \
+            and all(column in traj.columns for column in more):
         return []
     skipped = []
     for rows in samples.kept_pieces(keep):

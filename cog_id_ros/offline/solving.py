@@ -18,22 +18,35 @@ def _core_reason(exc):
     return re.sub(r'^sample \d+: ', '', one_line(exc))
 
 
-def _position_columns(active):
-    return ', '.join(f"'{trajectory_io.joint_column(j, 'position')}'" for j in active)
+def _columns(solver):
+    """(the columns a refused pose is named by, per field (position, velocity,
+    acceleration) the column of each value of a sample): the solver's ``message_columns``
+    where it has them (a floating base's packed samples), else the active joints'."""
+    named = getattr(solver, 'message_columns', None)
+    if named is not None:
+        return named
+    active = solver.mechanism.active_joints
+    fields = [[trajectory_io.joint_column(j, f) for j in active] for f in trajectory_io.FIELDS]
+    return fields[0], fields
 
 
-def _invalid_message(path, row, active, exc, values=None):
-    """One line for a row the core refused. ``values``: the row's (q, qd, qdd) of the
-    active joints; for a value out of range the column holding the largest magnitude is
-    named, for the other reasons the positions (the pose is what is wrong)."""
-    columns = _position_columns(active)
+def _invalid_message(path, row, columns, exc, values=None):
+    """One line for a row the core refused. ``columns``: :func:`_columns`; ``values``: the
+    row's (q, qd, qdd); for a value out of range the column holding the largest magnitude
+    is named, for the other reasons the positions (the pose is what is wrong)."""
+    pose, per_field = columns
+    named = ', '.join(f"'{c}'" for c in pose)
     if values is not None and getattr(exc, 'reason', None) in ('out_of_range', 'non_finite'):
-        with np.errstate(all='ignore'):
-            mags = np.abs(np.asarray(values, dtype=float))     # (3, M)
-            mags[np.isnan(mags)] = np.inf
-        field, k = np.unravel_index(int(np.argmax(mags)), mags.shape)
-        columns = f"'{trajectory_io.joint_column(active[k], trajectory_io.FIELDS[field])}'"
-    return (f'{path}: row {row} (line {row + 1} of the file), column(s) {columns}: '
+        largest = None
+        for field, names in zip(values, per_field):
+            with np.errstate(all='ignore'):
+                mags = np.abs(np.asarray(field, dtype=float))[:len(names)]
+                mags[np.isnan(mags)] = np.inf
+            k = int(np.argmax(mags))
+            if largest is None or mags[k] > largest[0]:
+                largest = (mags[k], names[k])
+        named = f"'{largest[1]}'" if largest is not None else named
+    return (f'{path}: row {row} (line {row + 1} of the file), column(s) {named}: '
             f'{_core_reason(exc)}')
 
 
@@ -74,7 +87,7 @@ def solve(solver, q, qd, qdd, chunk, skip_invalid, progress, path, rows=None, ra
     efforts = np.zeros((n, m))
     valid = np.zeros(n, bool)
     skipped = []
-    active = solver.mechanism.active_joints
+    columns = _columns(solver)
     mode = 'skip' if skip_invalid else 'raise'
     pos, skip_at, skip_error = 0, None, None
     total = rows.size
@@ -115,7 +128,7 @@ def solve(solver, q, qd, qdd, chunk, skip_invalid, progress, path, rows=None, ra
                     f'{path}: rows {first}..{last} (lines {first + 1}..{last + 1} of the '
                     f'file): {_core_reason(exc)}', EXIT_INPUT) from None
             r = int(idx[int(sample)])
-            raise ToolError(_invalid_message(path, r + 1, active, exc, (q[r], qd[r], qdd[r])),
+            raise ToolError(_invalid_message(path, r + 1, columns, exc, (q[r], qd[r], qdd[r])),
                             EXIT_INPUT) from None
         efforts[idx] = torques
         valid[idx] = ok

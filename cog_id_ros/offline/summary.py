@@ -146,6 +146,9 @@ def format_summary(summary):
              f"{s['time_end']:.6g} s; {s['solved']:,} solved, {s['skipped']:,} skipped"]
     if s['estimated_columns']:
         lines.append('estimated from the samples: ' + ', '.join(s['estimated_columns']))
+    if s.get('contacts') is not None:     # a floating base
+        lines.append('contacts: ' + (', '.join(s['contacts']) or 'none') + ' (their wrenches '
+                     'and the base wrench follow the efforts in the output)')
     if s.get('unwrap'):
         lines.append('unwrapped (--unwrap): ' + (', '.join(
             f"{col}: {u['rows']:,} row(s) shifted by a multiple of 2 pi ({u['wraps']:,} wrap(s))"

@@ -12,6 +12,8 @@ per sample, comma-separated, UTF-8 (a byte-order mark is allowed; cells may be q
   active are ignored (with a note); the same suffixes on a name that is not a joint of
   the mechanism are an error (a typo would otherwise go unnoticed). Any other column
   (``label``, ``joint3.effort``, ...) is ignored with a note and never parsed.
+* A floating-base mechanism's base columns (``base.x`` ... ``base.qw``, optional
+  velocities and accelerations) are read too: :mod:`cog_id_ros.offline.base_samples`.
 
 Row numbering, in every message of this module and of the tool: data rows count from
 1 and the header does not count, so "row 17" is the 17th sample and sits on line 18
@@ -21,7 +23,8 @@ always differ by exactly one.
 
 Output (:func:`write_efforts`): ``time`` and ``J.effort`` per active joint, every value
 written with ``repr`` (shortest text that reads back to the same float), the cells of
-a skipped sample left empty. Every file is written to a temporary file in the target
+a skipped sample left empty (a floating base's wrench columns follow the efforts:
+``extra_columns``). Every file is written to a temporary file in the target
 directory and renamed into place only when complete
 (:func:`cog_id_ros.offline.atomic_files.atomic_output`), so a failed run leaves no partial
 file and never clobbers an older one.
@@ -30,7 +33,7 @@ file and never clobbers an older one.
 import csv
 import math
 import re
-from typing import Iterator, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -130,10 +133,11 @@ def _read_text(path):
 
 
 def _classify_header(path, names, joints, active_joints, fields=FIELDS, required='position',
-                     role='active joint'):
+                     role='active joint', extra=()):
     """Map the header to used columns (``<joint>.<field>`` for ``fields``; ``required`` the
     field every active joint must have; ``role``: what the read joints are called in the
-    messages); returns ({name: index}, notes)."""
+    messages; ``extra``: other column names read when present); returns ({name: index},
+    notes)."""
     joints = list(joints)
     active = list(active_joints)
     joint_set = set(joints)
@@ -148,7 +152,7 @@ def _classify_header(path, names, joints, active_joints, fields=FIELDS, required
     ignored_inactive = []
     ignored_other = []
     for i, name in enumerate(names):
-        if name == TIME:
+        if name == TIME or name in extra:
             used[name] = i
             continue
         joint, dot, field = name.rpartition('.')
@@ -280,7 +284,9 @@ def _locate_bad_cell(path, lines, n_columns, order, numpy_message):
 
 def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequence[str],
                     fields: Sequence[str] = FIELDS, required: str = 'position',
-                    first_row: Sequence[str] = (), role: str = 'active joint') -> 'Trajectory':
+                    first_row: Sequence[str] = (), role: str = 'active joint',
+                    extra: Sequence[str] = (),
+                    check_header: Callable[[list[str]], None] | None = None) -> 'Trajectory':
     """Read and validate a trajectory CSV for a mechanism (``joints``, ``active_joints``).
 
     ``fields``: the ``<joint>.<field>`` columns read (a trajectory's position, velocity and
@@ -289,7 +295,10 @@ def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequen
     ``first_row``: fields of ``fields`` read on the first data row only (the other rows'
     cells are not parsed), into ``Trajectory.first_row`` {column name: float}; ``role``:
     what ``active_joints`` are called in the messages ('joint-space joint' for
-    ``cog_id_torques --space joint``).
+    ``cog_id_torques --space joint``); ``extra``: other column names read (parsed and
+    checked like the joints' columns) when the header has them (a floating base's
+    ``base.x`` ...); ``check_header(names)``, optional, sees the header's names before any
+    row is parsed and may raise :class:`TrajectoryError`.
 
     Raises :class:`TrajectoryError` naming the row and column of the first problem:
     a missing, duplicate or unknown column, a ragged or blank row, a cell that is not a
@@ -304,7 +313,10 @@ def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequen
         raise TrajectoryError(path, 'the file is empty; expected a header row such as '
                               f"'{TIME},{joint_column(active_joints[0], required)}'", line=1)
     names = [name.strip() for name in _cells(lines[0])]
-    used, notes = _classify_header(path, names, joints, active_joints, fields, required, role)
+    used, notes = _classify_header(path, names, joints, active_joints, fields, required, role,
+                                   frozenset(extra))
+    if check_header is not None:
+        check_header(names)
     if len(lines) < 2:
         raise TrajectoryError(path, 'no data rows after the header', header=True)
     once = {name: i for name, i in used.items() if name.rpartition('.')[2] in first_row}
@@ -339,13 +351,16 @@ def read_trajectory(path: PathLike, joints: Sequence[str], active_joints: Sequen
 
 
 def format_efforts(time: np.ndarray, efforts: np.ndarray, valid: np.ndarray,
-                   active_joints: Sequence[str], block: int = 100_000) -> Iterator[str]:
-    """Yield the output CSV text in blocks (header first)."""
+                   active_joints: Sequence[str], block: int = 100_000,
+                   extra_columns: Sequence[str] = ()) -> Iterator[str]:
+    """Yield the output CSV text in blocks (header first). ``extra_columns``: the names of
+    the columns of ``efforts`` after the active joints' (a floating base's wrenches)."""
     time = np.asarray(time, dtype=float)
     efforts = np.asarray(efforts, dtype=float).reshape(time.size, -1)
     valid = np.ones(time.size, bool) if valid is None else np.asarray(valid, bool)
     yield ','.join(_csv_cell(cell) for cell in
-                   [TIME] + [joint_column(j, EFFORT) for j in active_joints]) + '\n'
+                   [TIME] + [joint_column(j, EFFORT) for j in active_joints]
+                   + list(extra_columns)) + '\n'
     for start in range(0, time.size, block):
         stop = min(start + block, time.size)
         ok = valid[start:stop]
