@@ -40,8 +40,24 @@ def format_header(mech, params_file):
             f'  {len(mech.links)} moving links ({mass:.6g} kg), {len(kinds)} joints ({by_kind}), '
             f"{loops} loop{'' if loops == 1 else 's'}, {mech.dof} DOF; gravity "
             f"[{', '.join(f'{g:g}' for g in mech.gravity)}] m/s^2",
-            f"  base link '{mech.base_link}' held fixed to the world (a fixed base: a robot "
-            f'that floats or stands on its feet is held by it here)']
+            _base_line(mech), *_contact_lines(mech)]
+
+
+def _base_line(mech):
+    if not mech.floating_base:
+        return (f"  base link '{mech.base_link}' held fixed to the world (a fixed base: a robot "
+                'that floats or stands on its feet is held by it here; '
+                'mechanism.floating_base frees it)')
+    return (f"  base link '{mech.base_link}' floats ({mech.base_mass:.6g} kg, COG "
+            f"[{', '.join(f'{round(x, 9) + 0.0:.4g}' for x in mech.base_com)}] m): six more freedoms, "
+            'whole_body_torques (docs/floating_base.md)')
+
+
+def _contact_lines(mech):
+    """One line per contact of mechanism.contacts: its kind, link and frame."""
+    return [f"  contact '{c.name}': {c.size}d on '{c.link_name}' at "
+            f"[{', '.join(f'{round(x, 9) + 0.0:.4g}' for x in c.xyz)}] m"
+            for c in mech.contacts.values()]
 
 
 def tree_hops(mech):

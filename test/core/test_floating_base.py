@@ -313,3 +313,11 @@ def test_backends_agree_to_the_bit(biped, batch):
     assert len(results) >= 2
     for backend, values in results.items():
         np.testing.assert_array_equal(values, results['reference'], err_msg=backend)
+
+
+def test_inspect_says_the_base_floats_and_names_the_contacts(biped):
+    from cog_id_ros.offline.inspect_structure import format_header
+    lines = format_header(biped, 'biped.yaml')
+    assert "base link 'torso' floats (3.24523 kg" in lines[2], lines
+    assert lines[3] == "  contact 'right_foot': 6d on 'foot_part' at [-0.09189, 0.01, 0.01224] m"
+    assert "contact 'left_toe': 3d on 'foot_part_2'" in lines[5]
