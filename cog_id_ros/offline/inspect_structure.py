@@ -48,9 +48,9 @@ def _base_line(mech):
         return (f"  base link '{mech.base_link}' held fixed to the world (a fixed base: a robot "
                 'that floats or stands on its feet is held by it here; '
                 'mechanism.floating_base frees it)')
-    return (f"  base link '{mech.base_link}' floats ({mech.base_mass:.6g} kg, COG "
-            f"[{', '.join(f'{round(x, 9) + 0.0:.4g}' for x in mech.base_com)}] m): six more freedoms, "
-            'whole_body_torques (docs/floating_base.md)')
+    com = ', '.join(f'{round(x, 9) + 0.0:.4g}' for x in mech.base_com)
+    return (f"  base link '{mech.base_link}' floats ({mech.base_mass:.6g} kg, COG [{com}] m): "
+            'six more freedoms, whole_body_torques (docs/floating_base.md)')
 
 
 def _contact_lines(mech):

@@ -7,6 +7,7 @@ the spawned process pickled). Every parameter of the table is an attribute by it
 the node's constructor.
 """
 import dataclasses
+import re
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -31,6 +32,61 @@ def commanded_joints(mechanism: Any, command_space: Any) -> list[str]:
                              "the ankle's pitch and roll): give mechanism.joint_space, or "
                              'command_space: actuator (setpoints naming the motors)')
     return list(mechanism.joint_space)
+
+
+#: a contact's name as it appears in a topic name (contact_wrenches/<name>)
+_TOPIC_TOKEN = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
+
+
+def contact_set_problem(value: Any, mechanism: Any) -> str:
+    """Why ``value`` cannot be the set of active contacts of ``mechanism`` ('' when it can):
+    a list of distinct names of mechanism.contacts ([] or any empty array: none)."""
+    known = list(getattr(mechanism, 'contacts', None) or ())
+    if value is None or isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
+        return (f"must be a list of contact names (of {', '.join(known) or 'none'}; [] for "
+                f'none), got {value!r}')
+    names = list(value)
+    if not all(isinstance(name, str) for name in names):
+        return f'must be a list of contact names, got {names!r}'
+    unknown = [name for name in names if name not in known]
+    if unknown:
+        return (f"{', '.join(repr(n) for n in unknown)} not in mechanism.contacts "
+                f"({', '.join(known) or 'none: mechanism.floating_base is false'})")
+    if len(set(names)) != len(names):
+        return f'names a contact twice: {names}'
+    return ''
+
+
+def check_floating(mechanism: Any, overrides: Mapping[str, Any]) -> None:
+    """A floating base (mechanism.floating_base) the node can serve, or MechanismConfigError
+    naming the parameter: contacts in the mechanism (the node balances the motion with
+    them), control_mode feedforward, command_space actuator; active_contacts (when given)
+    names some of them. Without a floating base, active_contacts names none."""
+    given = overrides.get('active_contacts')
+    if given is not None and given != []:
+        NODE_PARAMETERS['active_contacts'].check(given, [])
+        problem = contact_set_problem(given, mechanism)
+        if problem:
+            raise MechanismConfigError('active_contacts', problem)
+    if not getattr(mechanism, 'floating_base', False):
+        return
+    if not mechanism.contacts:
+        raise MechanismConfigError(
+            'mechanism.contacts', 'mechanism.floating_base is true but the mechanism names no '
+                                  'contact: cog_id_node balances the motion of a floating base '
+                                  'with contact wrenches; give mechanism.contacts.<name> '
+                                  '({link: <link>, type: 6d or 3d}), or a fixed base')
+    for name in mechanism.contacts:
+        if not _TOPIC_TOKEN.fullmatch(name):
+            raise MechanismConfigError(
+                f'mechanism.contacts.{name}', 'the name must be a letter then letters, digits '
+                                              'or _ (it names the topic contact_wrenches/<name>)')
+    for parameter, value, served in (('control_mode', 'feedforward', 'feedforward'),
+                                     ('command_space', 'actuator', 'actuator')):
+        if overrides.get(parameter, value) != value:
+            raise MechanismConfigError(
+                parameter, f'is {overrides[parameter]!r}, but a floating base '
+                           f'(mechanism.floating_base) is served with {parameter} {served} only')
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -61,10 +117,16 @@ class NodeConfig:
 
         The mechanism's effort limits (joints.<j>.effort, URDF <limit effort>) are the
         default of effort_limits; the node's parameter, when given, wins. In a feedback
-        control_mode, joint_states_decimation is 0 unless given.
+        control_mode, joint_states_decimation is 0 unless given. Parameters that may change
+        at run time (``runtime``: active_contacts) are not declared here: the part of the
+        node that uses them declares them (:class:`.floating_mode.FloatingBase`); a floating
+        base is checked here (:func:`check_floating`).
         """
         commanded = commanded_joints(mechanism, overrides.get('command_space', 'actuator')
                                      if 'command_space' in table else 'actuator')
+        if table is NODE_PARAMETERS:
+            check_floating(mechanism, overrides)
+        table = {name: p for name, p in table.items() if not p.runtime}
 
         def types(joint_names: Sequence[str]) -> list[str]:
             return [mechanism.joint_types[mechanism.joints.index(j)] for j in joint_names]
@@ -128,8 +190,12 @@ def start_up_summary(mechanism: Any, config: NodeConfig) -> str:
     limits = ', '.join(f'{j} {lim:g}' for j, lim in zip(config.motors,
                                                          config.effort_limits))
     return (f"mechanism '{mechanism.name}': {len(mechanism.links)} links, "
-            f"{len(mechanism.joints)} joints, {mechanism.dof} DOF, base link "
-            f"'{mechanism.base_link}' held fixed, active joints "
+            f"{len(mechanism.joints)} joints, {mechanism.dof} DOF, "
+            + (f"floating base '{mechanism.base_link}' (its state from base_state), contacts "
+               + ', '.join(f'{c.name} ({c.size}d)' for c in mechanism.contacts.values())
+               if getattr(mechanism, 'floating_base', False) else
+               f"base link '{mechanism.base_link}' held fixed")
+            + ', active joints '
             f"{', '.join(config.motors)}{' (redundant)' if mechanism.is_redundant else ''}"
             + (f"; setpoints in joint space: {', '.join(config.active_joints)}"
                if config.joint_space else '')

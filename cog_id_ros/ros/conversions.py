@@ -64,6 +64,13 @@ TRAJECTORY_REASONS = {
     'busy': 'a newer trajectory arrived while this one waited for the solver (queue of one)',
 }
 
+#: reasons only a floating base's setpoints and trajectories are rejected for
+#: (cog_id_ros.ros.floating_mode)
+FLOATING_REASONS = {
+    'base_state': 'no base_state received yet, or none for base_state_timeout (a setpoint); '
+                  'a trajectory carries no base motion (joint_trajectory)',
+}
+
 #: every core error reason (cog_id_ros.core.errors.REASONS) is a key of REASONS
 _CORE_REASONS = ('malformed', 'non_finite', 'out_of_range', 'limit', 'closure', 'unreachable',
                  'singular', 'inconsistent')
@@ -77,7 +84,7 @@ class Rejected(ValueError):
 
     def __init__(self, reason: str, message: str) -> None:
         assert reason in REASONS or reason in TRAJECTORY_REASONS or \
-            reason in MEASUREMENT_ONLY_REASONS, reason
+            reason in MEASUREMENT_ONLY_REASONS or reason in FLOATING_REASONS, reason
         self.reason = reason
         super().__init__(message)
 

@@ -329,7 +329,8 @@ class Report:
                   ('nodes_with_this_name', same_name_nodes),
                   ('last_closure_residual', f'{residual:.3g}'),
                   ('closure_condition_number', f'{condition:.4g}'),
-                  *self._times(), *feedback]
+                  *self._times(), *feedback,
+                  *(node.floating.diagnostics() if node.floating is not None else ())]
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values]
         return status
 

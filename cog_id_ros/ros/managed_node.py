@@ -192,6 +192,8 @@ class ManagedCogIdNode(LifecycleNodeMixin, CogIdNode):
             for loop in (made.get('setpoint_loop'), made.get('measurement_loop')):
                 if loop is not None:
                     loop.stop()
+        if made.get('floating') is not None:    # its thread, topics and run-time parameter
+            made.pop('floating').release()
         for timer in made.get('timers_made', []):
             self.destroy_timer(timer)
         diagnostics = made.get('diagnostics')

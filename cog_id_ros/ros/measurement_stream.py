@@ -27,6 +27,10 @@ from .conversions import JointSelector, Rejected, nearest_turn, setpoint_arrays
 from .lost_messages import LostMessages
 from .setpoint_filter import NANOSECONDS
 
+#: s a feedback mode waits for its first measured state before it says so (and between
+#: two reminders)
+NO_STATE_PERIOD = 5.0
+
 
 class MeasurementStream:
     """Checks the measured states of one stream by the node's parameters.
@@ -55,6 +59,8 @@ class MeasurementStream:
         self.stopped = True                   # no measurement yet, or none for the timeout
         self.accepted = 0
         self._taken: list[float] = []
+        self._waiting_since: float | None = None    # the first silence_to_tell
+        self._told: float | None = None             # when the last one said something
 
     def take(self, msg: Any, info: dict | None = None) -> tuple[list[float], list[float]]:
         """(positions, velocities) of the active joints of JointState ``msg`` (positions
@@ -121,6 +127,28 @@ class MeasurementStream:
         self.last_time = time.monotonic()
         self.stopped = False
         self.accepted += 1
+
+    def silence_to_tell(self, publishers: int, topic: str) -> str:
+        """The warning of a feedback mode with no measured state accepted since it started
+        serving (the first call) or since the last one, every NO_STATE_PERIOD s ('' : not
+        now); ``publishers`` of ``topic``, as the node sees them. A plant that stopped (a
+        simulator at a singular pose), or stopped before the controller connected, or
+        publishes elsewhere, leaves a controller that commands nothing: it says why."""
+        now, last = time.monotonic(), self.last_time
+        if self._waiting_since is None:
+            self._waiting_since = now
+        since = self._waiting_since if last is None else last
+        told = max(since if self._told is None else self._told, since)
+        if now - told < NO_STATE_PERIOD:
+            return ''
+        self._told = now
+        return (f"no measured state accepted {'in' if last is None else 'since the last one,'} "
+                f'{now - since:.0f} s, on {topic} ({publishers} publisher(s)): '
+                'nothing is commanded until one comes; is the plant running (a simulator whose '
+                'integration stopped publishes no more states: its log and /diagnostics say '
+                'why), and does it publish on this topic (remap it with -r '
+                'measured_joint_states:=...)? Those that came and were rejected are counted in '
+                '/diagnostics (measurements_rejected.<reason>)')
 
     def age(self) -> float | None:
         """Seconds since the last accepted measurement was received (None: none yet)."""

@@ -4,8 +4,10 @@ Topics (relative names: namespaces and ``-r old:=new`` remaps apply; the table w
 types, QoS and meaning is :mod:`.topics`, documented in docs/node.md): ``joint_setpoint``
 and ``joint_trajectory`` in; ``effort_command`` and ``joint_effort`` out (one per accepted
 setpoint), ``joint_states`` (every ``joint_states_decimation``-th), ``effort_trajectory``
-and ``/diagnostics``. The parameters, read once at start-up and read-only afterwards, are
-the mechanism's and the node's own (:mod:`.parameters`, made into a :class:`.NodeConfig`).
+and ``/diagnostics``; with a floating base (:mod:`.floating_mode`) ``base_state`` in and
+``contact_wrenches/<name>`` and ``base_wrench`` out too. The parameters, read once at
+start-up and read-only afterwards (all but ``active_contacts``), are the mechanism's and
+the node's own (:mod:`.parameters`, made into a :class:`.NodeConfig`).
 
 This module is the wiring: publishers, subscriptions, timers, and the callback that
 serves a setpoint. The setpoint is checked and estimated by :mod:`.setpoint_stream`,
@@ -50,6 +52,7 @@ from .diagnostics import (
     guarded,
 )
 from .feedback import FeedbackMode
+from .floating_mode import NO_TRAJECTORIES, FloatingBase
 from .joint_space_solver import JointSpaceSolver
 from .measurement_stream import MeasurementStream
 from .modes import Mode, make_mode
@@ -61,9 +64,6 @@ from .topics import FEEDBACK_TOPICS, TOPICS, control_qos, stream_qos
 from .trajectory_worker import TrajectoryWorker
 
 NODE_NAME = 'cog_id_node'
-#: s a feedback mode waits for its first measured state before it says so (and between
-#: two reminders)
-NO_STATE_PERIOD = 5.0
 
 
 class CogIdNode(ReadOnlyNode):
@@ -71,6 +71,8 @@ class CogIdNode(ReadOnlyNode):
 
     #: whether it serves and publishes (a managed node: only while active)
     active = True
+    #: a floating base's topics, parameter and mode (:mod:`.floating_mode`); None: fixed
+    floating: FloatingBase | None = None
 
     def __init__(self, command_line: Sequence[str] | None = None,
                  interruptible: Callable[[], ContextManager] = contextlib.nullcontext,
@@ -140,6 +142,10 @@ class CogIdNode(ReadOnlyNode):
         self._joint_states_countdown = 1      # served setpoints until the next joint_states
         with self.qos_overrides_honoured(overrides):
             self._create_topics()
+            if self.mechanism.floating_base:    # base_state in, wrenches out, its mode
+                self.floating = FloatingBase(self, overrides,
+                                             QoSOverridingOptions.with_default_policies)
+                self.mode = cast(Mode, self.floating.mode)
         # the trajectory process builds the kernels the node's solver uses: never again
         # the ones the node gave up on ('auto' that fell back to 'python': a hung compiler)
         self.trajectory_worker = TrajectoryWorker(
@@ -159,7 +165,8 @@ class CogIdNode(ReadOnlyNode):
         self.get_logger().info(start_up_summary(self.mechanism, config))
         for warning in getattr(self.mechanism, 'assembly_warnings', None) or ():
             self.get_logger().warning(f'mechanism: {warning}')
-        for warning in self.mode.gain_warnings() if self.mode.measured else ():
+        for warning in cast(FeedbackMode, self.mode).gain_warnings() if self.mode.measured \
+                else ():
             self.get_logger().warning(warning)
 
     def _new_solver(self) -> Any:
@@ -228,12 +235,20 @@ class CogIdNode(ReadOnlyNode):
 
     # --- threads -----------------------------------------------------------------------------
 
+    def _threads(self) -> list[tuple[str, Any]]:
+        """(name, thread) of each thread of the node: the setpoint thread, the measured state
+        and base state threads where there are, the trajectory worker."""
+        floating = self.floating
+        return [(name, thread) for name, thread in (
+            ('setpoint thread', self.setpoint_loop), ('measured state thread',
+                                                      self.measurement_loop),
+            ('base state thread', None if floating is None else floating.loop),
+            ('trajectory worker', self.trajectory_worker)) if thread is not None]
+
     def start(self) -> None:
-        """Start the setpoint thread and the trajectory worker (once the node is built)."""
-        self.setpoint_loop.start()
-        if self.measurement_loop is not None:
-            self.measurement_loop.start()
-        self.trajectory_worker.start()
+        """Start the node's threads and the trajectory worker (once the node is built)."""
+        for _, thread in self._threads():
+            thread.start()
         self._threads_started = True
 
     def stopped_threads(self) -> list[str]:
@@ -245,24 +260,20 @@ class CogIdNode(ReadOnlyNode):
         if not getattr(self, '_threads_started', False):
             return []
         out = []
-        for name, thread in (('setpoint thread', self.setpoint_loop),
-                             ('measured state thread', self.measurement_loop),
-                             ('trajectory worker', self.trajectory_worker)):
-            if thread is not None and thread.ended_by_itself:
+        for name, thread in self._threads():
+            if thread.ended_by_itself:
                 failure = thread.failure
                 out.append(f'{name}: ' + (f'{type(failure).__name__}: {failure}'
                                           if failure is not None else 'ended'))
         return out
 
     def stop(self) -> list[str]:
-        """Stop both (before the node is destroyed); returns stopped_threads() as it was
+        """Stop them all (before the node is destroyed); returns stopped_threads() as it was
         before (what ended by itself)."""
         stopped = self.stopped_threads()
         self._threads_started = False
-        self.setpoint_loop.stop()
-        if self.measurement_loop is not None:
-            self.measurement_loop.stop()
-        self.trajectory_worker.stop()
+        for _, thread in self._threads():
+            thread.stop()
         return stopped
 
     def internal_error(self, where: str, exc: BaseException) -> None:
@@ -303,6 +314,8 @@ class CogIdNode(ReadOnlyNode):
         self.effort_pub.publish(self.outputs.state_for(
             msg.header, *self._motor_state(stream.received, v, self.solver), efforts))
         stream.accept()
+        if self.floating is not None:               # the wrenches, after the command
+            self.floating.publish(stream.stamp)
         if self.joint_states_pub is not None:       # last: nothing waits for it
             self._joint_states_due(msg.header.frame_id, stream.stamp, v, self.solver)
 
@@ -463,7 +476,11 @@ class CogIdNode(ReadOnlyNode):
             # the timer may wake before the measured state thread, with fresh states queued
             self.setpoint_loop.serve_queued()
             cast(Any, self.measurement_loop).serve_queued()
-            self._no_measured_state(stream.last_time)
+            warning = stream.silence_to_tell(    # none accepted for a while: say why
+                self.counts.matched['measured_joint_states'],
+                cast(Any, self.measurement_loop).subscription.topic_name)
+            if warning:
+                self.get_logger().warning(warning)
             if not stream.stopped_for(self.config.measurement_timeout, self._resumed('measured')):
                 return
             self.counts.totals['timeouts'] += 1
@@ -472,29 +489,6 @@ class CogIdNode(ReadOnlyNode):
                 self.get_logger().warning(
                     f'no measured state accepted for {self.config.measurement_timeout:g} s: '
                     f'{what}')
-
-    def _no_measured_state(self, last: float | None) -> None:
-        """A feedback mode with no measured state accepted since it started serving, or
-        since ``last`` (monotonic): said every NO_STATE_PERIOD s. A plant that stopped (a
-        simulator at a singular pose), or stopped before the controller connected, or
-        publishes elsewhere, leaves a controller that commands nothing: it says why."""
-        now = time.monotonic()
-        since = self.__dict__.setdefault('_serving_since', now) if last is None else last
-        told = max(self.__dict__.get('_told_no_state', since), since)
-        if now - told < NO_STATE_PERIOD:
-            return
-        self._told_no_state = now
-        publishers = self.counts.matched['measured_joint_states']
-        self.get_logger().warning(
-            f"no measured state accepted {'in' if last is None else 'since the last one,'} "
-            f'{now - since:.0f} s, on '
-            f'{cast(Any, self.measurement_loop).subscription.topic_name} ({publishers} '
-            f'publisher(s)): '
-            'nothing is commanded until one comes; is the plant running (a simulator whose '
-            'integration stopped publishes no more states: its log and /diagnostics say why), '
-            'and does it publish on this topic (remap it with -r measured_joint_states:=...)? '
-            'Those that came and were rejected are counted in /diagnostics '
-            '(measurements_rejected.<reason>)')
 
     def _woke_late(self, timer: str) -> bool:
         """Whether the timeout timer ``timer`` is to wait: it ran more than two of its
@@ -554,6 +548,9 @@ class CogIdNode(ReadOnlyNode):
         """A serialized JointTrajectory: refused at once when too long, else handed to the
         trajectory worker (a process of its own; queue of one)."""
         points, most = trajectory_point_count(raw), self.config.max_trajectory_points
+        if self.floating is not None:       # no base motion in a trajectory
+            self._trajectory_rejected('base_state', NO_TRAJECTORIES, points)
+            return
         if points is not None and points > most:
             self._trajectory_rejected(
                 'too_long', f'{points} points, more than max_trajectory_points ({most})', points)

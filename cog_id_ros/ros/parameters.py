@@ -40,6 +40,8 @@ TIMEOUT_BEHAVIORS = ('hold', 'zero', 'none')
 CONTROL_MODES = ('feedforward', 'computed_torque', 'pd_feedforward', 'gravity_compensation')
 #: command_space: what setpoints, trajectories and measured states name (efforts: the motors)
 COMMAND_SPACES = ('actuator', 'joint')
+#: base_acceleration (floating base): what the base's acceleration is taken to be
+BASE_ACCELERATIONS = ('estimated', 'zero')
 #: default largest move of an active joint between two measured states (rad, m): 200 rad/s
 #: or 20 m/s at 1 kHz, far beyond a physical robot's, far below an encoder glitch's turn
 MEASUREMENT_MAX_STEP = {'rad': 0.2, 'm': 0.02}
@@ -62,11 +64,14 @@ class NodeParameter:
     ``kind`` says how a value is checked: ``'number'`` (a float from ``low`` to ``high``,
     or ``special``), ``'integer'`` (an int from ``low`` to ``high``), ``'choice'`` (one of
     ``choices``), ``'bool'``, ``'per_joint'`` (one positive float per active joint or one
-    for all; ``None`` or an empty list: ``per_joint_default``) or ``'gains'`` (one finite
-    float >= 0 per active joint or one for all; ``None`` or an empty list: ``default``).
+    for all; ``None`` or an empty list: ``per_joint_default``), ``'gains'`` (one finite
+    float >= 0 per active joint or one for all; ``None`` or an empty list: ``default``) or
+    ``'names'`` (a list of distinct strings; ``None``: not given).
     ``description`` is the meaning (markdown: the docs' table; the node's
     ParameterDescriptor without backticks);
     ``default_text`` the docs' default column where ``default`` alone does not say it.
+    ``runtime``: the parameter may change while the node runs (declared and checked by the
+    part of the node that uses it, not read-only); every other one is read-only.
     """
 
     name: str
@@ -82,6 +87,7 @@ class NodeParameter:
     per_joint_default: Callable[[str], float] | None = None   # joint type -> default
     what: str = ''                                             # 'limit', 'step' in messages
     default_text: str = ''
+    runtime: bool = False
 
     def check(self, value: Any, active_types: Sequence[str]) -> Any:
         """``value`` as the node uses it (per_joint: a numpy array); MechanismConfigError
@@ -106,6 +112,8 @@ class NodeParameter:
             return '> 0 each (`.inf`: none); one per active joint or one for all'
         if self.kind == 'gains':
             return '≥ 0 each, finite; one per active joint or one for all'
+        if self.kind == 'names':
+            return 'names of `mechanism.contacts`, each once (`[]`: none)'
         if self.kind == 'integer':
             text = f'{self.low} to {self.high}'
         elif self.high == math.inf:
@@ -211,8 +219,20 @@ def _check_gains(param: NodeParameter, value: Any, active_types: list[str]) -> A
     return np.array(gains)
 
 
+def _check_names(param: NodeParameter, value: Any, active_types: list[str]) -> Any:
+    if value is None:
+        return None
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)) or \
+            not all(isinstance(v, str) for v in value):
+        param.fail(f'must be a list of names, got {value!r}')
+    if len(set(value)) != len(value):
+        param.fail(f'names one twice: {list(value)}')
+    return list(value)
+
+
 _CHECKS = {'number': _check_number, 'integer': _check_integer, 'choice': _check_choice,
-           'bool': _check_bool, 'per_joint': _check_per_joint, 'gains': _check_gains}
+           'bool': _check_bool, 'per_joint': _check_per_joint, 'gains': _check_gains,
+           'names': _check_names}
 
 
 def by_unit(values: dict[str, float], per: str = '') -> dict[str, Any]:
@@ -420,6 +440,29 @@ NODE_PARAMETERS: dict[str, NodeParameter] = _table(
                     "publishes `timeout_behavior`'s command, again every `inactive_period`, "
                     '`cleanup` releases what configure made, `shutdown` ends the process. '
                     'false: the node serves from the start'),
+    NodeParameter(
+        'base_state_timeout', 'double', 0.1, 'number', unit='s', low=1e-3, high=3600.0,
+        description='floating base (`mechanism.floating_base: true`): a setpoint is served '
+                    'with the latest `base_state` only while that was received less than this '
+                    'ago (else rejected, `base_state`); a `base_state` published longer ago '
+                    'than this is rejected (`stale`), and after this long without one the '
+                    "base acceleration's estimator starts again"),
+    NodeParameter(
+        'base_acceleration', 'string', 'estimated', 'choice', choices=BASE_ACCELERATIONS,
+        description='floating base: the base acceleration `whole_body_torques` is given '
+                    '(`nav_msgs/Odometry` carries none): `estimated` the time derivative of '
+                    "`base_state`'s twist, by the setpoints' estimator (`estimator_window` "
+                    'twists, restarted across a gap longer than `max_setpoint_interval`: 0 '
+                    'for the first base state of a stream); `zero` always 0'),
+    NodeParameter(
+        'active_contacts', 'string[]', None, 'names', runtime=True,
+        default_text='every contact of `mechanism.contacts`',
+        description='floating base: the contacts touching the world now, whose wrenches '
+                    'balance the motion (published on `contact_wrenches/<name>`); the only '
+                    'parameter that may change while the node runs (a parameter set: an '
+                    'unknown name is refused with the reason, the contacts stay as they '
+                    'were); `[]`: none (the robot in flight: everything left in '
+                    '`base_wrench`). A mechanism without a floating base has no contacts'),
 )
 
 #: rows of the docs' table for parameters the node does not declare from NODE_PARAMETERS:

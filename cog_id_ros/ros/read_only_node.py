@@ -6,14 +6,16 @@ values given to the node (params files, ``-p``) or from a table of
 (MechanismConfigError: main() turns it into exit status 2 and one line); it checks the
 QoS overrides; and once the node is built (:meth:`ReadOnlyNode.refuse_changes`) it
 refuses every parameter change with the node's own reason, naming the parameter (read-only,
-or not a parameter of the node). It also routes the package's Python log lines to the
+or not a parameter of the node), except those of a parameter the node let change at run
+time (:meth:`ReadOnlyNode.allow_changes`: cog_id_node's ``active_contacts``), checked by
+their own rule and applied once set. It also routes the package's Python log lines to the
 node's logger while it exists, and destroys a node whose build failed
 (:meth:`ReadOnlyNode.build_or_destroy`). A subclass
 provides ``internal_error(where, exc)``: the refusal is a guarded callback
 (:func:`.diagnostics.guarded`).
 """
 import contextlib
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence, cast
 import warnings
 
 import numpy as np
@@ -39,6 +41,8 @@ class ReadOnlyNode(Node):
                                   'are read-only (restart the node with the new value)')
         self._unknown_reason = f'not a parameter of {node_name}'
         self._refusing = False
+        #: parameters that may change at run time: name -> (check, apply)
+        self._changeable: dict[str, tuple[Callable[[Any], str], Callable[[Any], None]]] = {}
         super().__init__(node_name, **kwargs)
         # the package's Python log lines (the core's: e.g. a fallback to the Python kernels
         # while a solver is built) in ROS's format, under this node's name
@@ -183,21 +187,61 @@ class ReadOnlyNode(Node):
         self.add_on_set_parameters_callback(self._refuse_parameter_changes)
         self._refusing = True
 
+    def allow_changes(self, name: str, check: Callable[[Any], str],
+                      apply: Callable[[Any], None]) -> None:
+        """Parameter ``name`` (declared, not read-only) may change at run time: a new value
+        is refused with the reason ``check(value)`` gives ('' : accepted), and
+        ``apply(value)`` is called once it is set."""
+        self._changeable[name] = (check, apply)
+
+    def forbid_changes(self, name: str) -> None:
+        """``name`` is refused like the rest again (what let it change is gone)."""
+        self._changeable.pop(name, None)
+
+    def _set_changeable(self, parameters: Sequence[Parameter]) -> SetParametersResult:
+        """Set ``parameters`` at once if each may change and its check accepts the value
+        (then each is applied), else refuse them all with the reasons."""
+        reason = self._refusal(parameters)
+        if reason:
+            return SetParametersResult(successful=False, reason=reason)
+        result = super().set_parameters_atomically(list(parameters))
+        if result.successful:
+            for parameter in parameters:
+                try:
+                    self._changeable[parameter.name][1](parameter.value)
+                except Exception as exc:   # noqa: BLE001 (no callback may end the node)
+                    cast(Any, self).internal_error(f'applying {parameter.name}', exc)
+        return result
+
     @guarded
     def _refuse_parameter_changes(self, parameters: Sequence[Parameter]) -> SetParametersResult:
-        return SetParametersResult(successful=False, reason=self._refusal(parameters))
+        reason = self._refusal(parameters)
+        return SetParametersResult(successful=not reason, reason=reason)
 
     def _refusal(self, parameters: Sequence[Parameter]) -> str:
-        """The reason a change of ``parameters`` is refused, naming each: one the node
-        declared is read-only; any other name (even '') is not a parameter of the node."""
-        declared = [p.name for p in parameters if self.has_parameter(p.name)]
+        """The reason a change of ``parameters`` is refused, naming each ('' when none is):
+        one the node let change is refused by its check; another one the node declared is
+        read-only; any other name (even '') is not a parameter of the node."""
+        changeable = [f'{_shown(p.name)}: {problem}' for p in parameters
+                      if p.name in self._changeable and self.has_parameter(p.name)
+                      and (problem := self._change_problem(p))]
+        declared = [p.name for p in parameters if self.has_parameter(p.name)
+                    and p.name not in self._changeable]
         unknown = [p.name for p in parameters if not self.has_parameter(p.name)]
-        parts = []
+        parts = changeable
         if declared:
             parts.append(f"{', '.join(map(_shown, declared))}: {self._read_only_reason}")
         if unknown:
             parts.append(f"{', '.join(map(_shown, unknown))}: {self._unknown_reason}")
         return '; '.join(parts)
+
+    def _change_problem(self, parameter: Parameter) -> str:
+        """Why the check of a changeable parameter refuses its new value ('' : it does not);
+        a check that fails is a refusal that says so."""
+        try:
+            return self._changeable[parameter.name][0](parameter.value)
+        except Exception as exc:   # noqa: BLE001 (the parameter service must answer)
+            return f'cannot be checked ({type(exc).__name__}: {exc})'
 
     # rclpy checks a descriptor's read_only before any callback and refuses with its own
     # words ("Trying to set a read-only parameter"), and a name the node does not have with
@@ -206,12 +250,12 @@ class ReadOnlyNode(Node):
     # still say read-only)
     def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
         if self._refusing:
-            return [self._refuse_parameter_changes([p]) for p in parameter_list]
+            return [self._set_changeable([p]) for p in parameter_list]
         return super().set_parameters(parameter_list)
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
         if self._refusing:
-            return self._refuse_parameter_changes(parameter_list)
+            return self._set_changeable(parameter_list)
         return super().set_parameters_atomically(parameter_list)
 
 

@@ -1,8 +1,9 @@
 """The node's topics, written once: name, message type, direction, QoS and meaning.
 
-``TOPICS`` is the one table (and ``FEEDBACK_TOPICS``, those of the feedback modes): the
-node creates its publishers and subscriptions with these names and QoS, and docs/node.md's
-topic table is generated from it (a test compares)::
+``TOPICS`` is the one table (and ``FEEDBACK_TOPICS``, those of the feedback modes, and
+``FLOATING_TOPICS``, those of a floating base): the node creates its publishers and
+subscriptions with these names and QoS, and docs/node.md's topic table is generated from
+it (a test compares)::
 
     python -m cog_id_ros.ros.topics --markdown
     python -m cog_id_ros.ros.topics --write docs/node.md
@@ -113,6 +114,27 @@ FEEDBACK_TOPICS: dict[str, Topic] = {t.name: t for t in (
 )}
 
 
+#: topics of a floating base (mechanism.floating_base: true) only
+FLOATING_TOPICS: dict[str, Topic] = {t.name: t for t in (
+    Topic('base_state', 'nav_msgs/Odometry', 'in (floating base)', STREAM,
+          "the base's state (the root link of the mechanism): `pose.pose` its pose in the "
+          'world frame `header.frame_id` (x, y, z, unit quaternion world from base), '
+          '`twist.twist` its linear and angular velocity in the base frame (`child_frame_id`, '
+          "Odometry's convention); covariances ignored; each setpoint is served with the "
+          'latest one (see "Floating base")'),
+    Topic('contact_wrenches/<name>', 'geometry_msgs/WrenchStamped', 'out (floating base)',
+          _CONTROL,
+          'one per served setpoint for each active contact (`active_contacts`; none for the '
+          'others): the wrench the ground applies to the robot, force and moment about the '
+          "contact point, in world axes (`frame_id`: base_state's `header.frame_id`, `world` "
+          "when empty); the setpoint's stamp; a `3d` contact's moment is 0"),
+    Topic('base_wrench', 'geometry_msgs/WrenchStamped', 'out (floating base)', _CONTROL,
+          'one per served setpoint: what the world must still apply at the base for the '
+          'motion (`whole_body_torques`: zero when the contacts balance it), force and moment '
+          'in the base frame at its origin (`frame_id`: the base link)'),
+)}
+
+
 #: cog_transmission_node's topics (docs/node.md, "Joint space (command_space) and
 #: cog_transmission_node")
 TRANSMISSION_TOPICS: dict[str, Topic] = {t.name: t for t in (
@@ -147,7 +169,7 @@ def qos_text(topic: Topic) -> str:
 def markdown_table() -> str:
     """docs/node.md's topic table, generated from TOPICS."""
     rows = ['| topic | type | dir | QoS | what |', '|---|---|---|---|---|']
-    for t in (*TOPICS.values(), *FEEDBACK_TOPICS.values()):
+    for t in (*TOPICS.values(), *FEEDBACK_TOPICS.values(), *FLOATING_TOPICS.values()):
         rows.append(f'| `{t.name}` | {t.type} | {t.direction} | {qos_text(t)} | '
                     f'{t.description} |')
     return '\n'.join(rows) + '\n'
