@@ -27,6 +27,8 @@ Every error is a MechanismConfigError naming the parameter (``robot_description`
 ``mechanism.urdf_file``, ``loop_closures.<name>.<key>``, ``mechanism.active_joints``, ...);
 errors inside the URDF give its line and name the link or joint.
 """
+import math
+
 from ..core.errors import MechanismConfigError
 from ..core.kinematics import joints
 from ..core.kinematics.parameters import ParameterReader, as_float, show
@@ -213,8 +215,18 @@ def _floating(out, robot, bodies, base):
             continue
         xyz = out.get(f'{prefix}{name}.xyz', [0.0, 0.0, 0.0])
         rpy = out.get(f'{prefix}{name}.rpy', [0.0, 0.0, 0.0])
+        for field, value in (('xyz', xyz), ('rpy', rpy)):
+            if not _three_numbers(value):
+                raise MechanismConfigError(f'{prefix}{name}.{field}',
+                                           f'must be a list of 3 finite numbers, got {value!r}')
         out[key] = bodies.body[link]
         out[f'{prefix}{name}.xyz'], out[f'{prefix}{name}.rpy'] = bodies.attach(link, xyz, rpy)
+
+
+def _three_numbers(value):
+    return isinstance(value, (list, tuple)) and len(value) == 3 and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+        for x in value)
 
 
 def _native_joint(out, bodies, name, kind, parent, child, offsets, axis):

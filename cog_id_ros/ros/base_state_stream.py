@@ -30,8 +30,12 @@ from .setpoint_filter import NANOSECONDS, SetpointFilter, StampError
 QUATERNION_TOLERANCE = 1e-3
 #: the world frame the wrenches are said to be in when base_state's header names none
 DEFAULT_WORLD_FRAME = 'world'
+#: m/s^2 or rad/s^2: an estimated base acceleration beyond this is no body's (a twist that
+#: jumped, or stamps too close together for its change): the base state is rejected
+#: (``jump``) rather than served as a huge inertial force
+MAX_BASE_ACCELERATION = 200.0
 #: the reasons a base_state is rejected for (counted per reason in /diagnostics)
-BASE_STATE_REASONS = ('stale', 'non_finite', 'malformed', 'stamp')
+BASE_STATE_REASONS = ('stale', 'non_finite', 'malformed', 'stamp', 'jump')
 
 
 class BaseState(NamedTuple):
@@ -95,6 +99,12 @@ class BaseStateStream:
                            ) from None
         acceleration = self.filter.estimate(stamp, velocity)[0] if self.estimated \
             else [0.0] * 6
+        largest = max(map(abs, acceleration))
+        if not largest <= MAX_BASE_ACCELERATION:
+            raise Rejected('jump', f'base_state: its twist changes at {largest:.6g} m/s^2 or '
+                                   f'rad/s^2 from the previous one (more than '
+                                   f'{MAX_BASE_ACCELERATION:g}): a jump of the twist, or stamps '
+                                   'too close together for its change; not served')
         self.filter.accept(stamp, velocity)
         self.last = BaseState([p.x, p.y, p.z, *(x / norm for x in quaternion)], velocity,
                               acceleration, msg.header.frame_id or DEFAULT_WORLD_FRAME, stamp)

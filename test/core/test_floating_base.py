@@ -321,3 +321,39 @@ def test_inspect_says_the_base_floats_and_names_the_contacts(biped):
     assert "base link 'torso' floats (3.24523 kg" in lines[2], lines
     assert lines[3] == "  contact 'right_foot': 6d on 'foot_part' at [-0.09189, 0.01, 0.01224] m"
     assert "contact 'left_toe': 3d on 'foot_part_2'" in lines[5]
+
+
+def test_what_a_user_gets_wrong_is_named(biped):
+    """Found by a new user trying to break it: each mistake is an error naming it."""
+    solver = cog_id_ros.InverseDynamics(biped)
+    theta = np.array([biped.assembled_positions[j] for j in biped.active_index])
+    pose = [0.0, 0.0, 0.67, 0.0, 0.0, 0.0, 1.0]
+    at_rest = solver.whole_body_torques(np.tile(pose, (2, 1)), None, None, np.tile(theta, (2, 1)))
+    assert at_rest.efforts.shape == (2, 12)            # None: at rest, in a batch too
+    for weights, what in (({'rigth_foot': [1.0] * 6}, 'not among the contacts'),
+                          ([1.0], 'a list of 3'), ({'right_foot': 'a'}, "of 'right_foot'")):
+        with pytest.raises(SetpointError, match=what):
+            solver.whole_body_torques(pose, None, None, theta, wrench_weights=weights)
+    everywhere = solver.whole_body_torques(pose, None, None, theta, wrench_weights=2.0)
+    np.testing.assert_allclose(everywhere.efforts, solver.whole_body_torques(
+        pose, None, None, theta).efforts, rtol=1e-12)     # scaling every weight changes nothing
+    with pytest.raises(SetpointError, match=r"\['right_foot'\]"):
+        solver.whole_body_torques(pose, None, None, theta, contacts='right_foot')
+    with pytest.raises(SetpointError, match='base velocity and acceleration'):
+        solver.whole_body_torques(pose, [0, 0, 0, 1e200, 0, 0], None, theta)
+    with pytest.raises(SetpointError, match='0 rows'):
+        solver.whole_body_torques(np.zeros((0, 7)), None, None, np.zeros((0, 12)))
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', AssemblyWarning)
+        for extra, name in (({'mechanism.contacts.left_toe.xyz': [0.1, 0.2]},
+                             'mechanism.contacts.left_toe.xyz'),
+                            ({'mechanism.contacts.left_toe.rpy': 'abc'},
+                             'mechanism.contacts.left_toe.rpy')):
+            with pytest.raises(MechanismConfigError, match=name):
+                cog_id_ros.Mechanism.from_parameters(biped_params(**extra), base_dir=BIPED)
+        params = {k: v for k, v in biped_params().items() if '.contacts.' not in k}
+        with pytest.raises(MechanismConfigError, match='must be a mapping'):
+            cog_id_ros.Mechanism.from_parameters({**params, 'mechanism.contacts': ['foot']},
+                                                 base_dir=BIPED)
+        assert cog_id_ros.Mechanism.from_parameters({**params, 'mechanism.contacts': {}},
+                                                    base_dir=BIPED).contacts == {}

@@ -280,8 +280,11 @@ def test_bad_base_states_are_rejected_and_counted(floating, biped):
     again = fresh_stamp()
     probe.send_base(again, good, [0.0] * 6)
     probe.send_base(again, good, [0.0] * 6)                         # the same stamp
+    close = fresh_stamp()       # a twist 0.1 m/s off 1 us later: 1e5 m/s^2, a jump
+    probe.send_base(close, good, [0.0] * 6)
+    probe.send_base(close + 1000, good, [0.1, 0.0, 0.0, 0.0, 0.0, 0.0])
     probe.send_base(fresh_stamp(), [*good[:3], 0.0, 0.0, 0.0, 0.5], [0.0] * 6)
-    expected = {'non_finite': 2, 'stamp': 1, 'malformed': 1}
+    expected = {'non_finite': 2, 'stamp': 1, 'malformed': 1, 'jump': 1}
 
     def counted():
         now = probe.status_now()
@@ -289,7 +292,7 @@ def test_bad_base_states_are_rejected_and_counted(floating, biped):
                    int(before[f'base_states_rejected.{k}']) + n for k, n in expected.items())
     assert wait_until(counted, timeout=10), probe.status_now()
     status = probe.status_now()
-    assert int(status['base_states_rejected']) == int(before['base_states_rejected']) + 4
+    assert int(status['base_states_rejected']) == int(before['base_states_rejected']) + 5
     assert status['last_base_state_rejection'].startswith('malformed: '), status
     assert 'norm 0.5' in status['last_base_state_rejection'], status
 

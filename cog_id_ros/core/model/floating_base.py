@@ -53,6 +53,13 @@ def read_floating_base(mech: Any, reader: Any,
 
 
 def _contacts(mech: Any, reader: Any) -> dict[str, Contact]:
+    if reader.has('mechanism.contacts'):        # not a mapping of contacts
+        value = reader.raw('mechanism.contacts')
+        if value not in ({}, [], ()):
+            raise MechanismConfigError(
+                'mechanism.contacts', f'must be a mapping, one entry per contact (<name>: '
+                                      f'{{link: <link>, type: 6d or 3d, xyz: [x, y, z], rpy: '
+                                      f'[r, p, y]}}), got {value!r}')
     names: list[str] = []
     for key in reader.params:
         if key.startswith(CONTACTS):

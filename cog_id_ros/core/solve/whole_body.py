@@ -47,6 +47,8 @@ def whole_body_torques(solver: Any, base_pose: Any, base_velocity: Any, base_acc
     target, qd, qdd, single = setpoints(solved, solver._serial.wrapping, theta, theta_dot,
                                         theta_ddot, solver.check_position_limits)
     n = 1 if single else len(target)
+    if not n:
+        raise SetpointError('no sample: theta has 0 rows')
     pose, velocity, acceleration = _base_state(base_pose, base_velocity, base_acceleration, n,
                                                single)
     rotation = _rotation(pose[:, 3:])
@@ -70,7 +72,7 @@ def whole_body_torques(solver: Any, base_pose: Any, base_velocity: Any, base_acc
     w = contact_wrenches(a_map, q_base, _weights(chosen, wrench_weights))
     efforts = tau - np.einsum('nmk,nk->nm', c_map, w)
     base_wrench = q_base - np.einsum('nrk,nk->nr', a_map, w)
-    _check_finite(np.concatenate([efforts, base_wrench, w], axis=1), qd, single)
+    _check_finite(np.concatenate([efforts, base_wrench, w], axis=1), qd, base, single)
     solver._state = state
     wrenches, start = {}, 0
     for contact in chosen:
@@ -84,6 +86,9 @@ def whole_body_torques(solver: Any, base_pose: Any, base_velocity: Any, base_acc
 
 def _chosen(mech: Any, contacts: Optional[Sequence[str]]) -> list[Any]:
     """The Contacts named (all of them for None), checked."""
+    if isinstance(contacts, str):
+        raise SetpointError(f"contacts: a list of names, got the string {contacts!r} (write "
+                            f"['{contacts}'])")
     names = list(mech.contacts) if contacts is None else list(contacts)
     for name in names:
         if name not in mech.contacts:
@@ -108,13 +113,21 @@ def _as_rows(record: Any) -> Any:
     return type(record)(*(np.array([list(field)], dtype=float) for field in record))
 
 
-def _check_finite(values: np.ndarray, qd: Any, single: bool) -> None:
-    """SetpointError (out_of_range) naming the first sample whose outputs are not finite."""
+def _check_finite(values: np.ndarray, qd: Any, base: np.ndarray, single: bool) -> None:
+    """SetpointError (out_of_range) naming the first sample whose outputs are not finite:
+    the base's velocity or acceleration where it holds the largest number, else the
+    actuators' rates (out_of_range's message)."""
     bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
-    if bad.size:
-        k = int(bad[0])
-        rates = list(qd) if single else np.asarray(qd)[k].tolist()
-        raise out_of_range(rates, [0.0] * len(rates), None if single else k)
+    if not bad.size:
+        return
+    k = int(bad[0])
+    rates = np.abs(np.asarray(qd, dtype=float).reshape(len(base), -1)[k])
+    if np.abs(base[k]).max() > rates.max(initial=0.0):
+        where = '' if single else f'sample {k}: '
+        raise SetpointError(f'{where}the base velocity and acceleration (largest magnitude '
+                            f'{np.abs(base[k]).max():.6g}) are too large to compute with',
+                            reason='out_of_range', sample=None if single else k)
+    raise out_of_range(rates.tolist(), [0.0] * len(rates), None if single else k)
 
 
 def contact_wrenches(a_map: np.ndarray, q_base: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -137,7 +150,7 @@ def _base_state(pose: Any, velocity: Any, acceleration: Any, n: int, single: boo
         if value is None:
             if label == 'base_pose':
                 raise SetpointError('base_pose: required, (x, y, z, qx, qy, qz, qw)')
-            value = np.zeros(size)
+            value = np.zeros((size,) if single else (n, size))
         try:
             array = np.array(value, dtype=float)
         except (TypeError, ValueError):
@@ -198,15 +211,33 @@ def _maps(rows: Sequence[Sequence[Any]], n: int) -> np.ndarray:
 
 
 def _weights(contacts: Sequence[Any], given: Any) -> np.ndarray:
-    """Per wrench component, its weight: ``given`` per contact (a dict by name or a list in
-    the contacts' order) of ``size`` positive numbers, or one; all 1 by default."""
+    """Per wrench component, its weight: all 1 by default; one positive number for all;
+    per contact (a dict by name, or a list in the contacts' order) ``size`` positive
+    numbers, or one. SetpointError naming what is wrong (a name not among the contacts, a
+    list of another length)."""
+    names = [contact.name for contact in contacts]
+    if given is None or isinstance(given, (int, float)) and not isinstance(given, bool):
+        per = [given] * len(contacts)
+    elif isinstance(given, dict):
+        unknown = [key for key in given if key not in names]
+        if unknown:
+            raise SetpointError(f'wrench_weights: {unknown} not among the contacts of this '
+                                f'call ({", ".join(names) or "none"})')
+        per = [given.get(name) for name in names]
+    elif isinstance(given, (list, tuple)) and len(given) == len(contacts):
+        per = list(given)
+    else:
+        raise SetpointError(f'wrench_weights: one number, a dict by contact name, or a list '
+                            f'of {len(contacts)} (one per contact: {", ".join(names)}), got '
+                            f'{given!r}')
     out = []
-    for k, contact in enumerate(contacts):
-        value = None if given is None else given.get(contact.name) if isinstance(given, dict) \
-            else given[k]
-        w = np.ones(contact.size) if value is None else np.broadcast_to(
-            np.array(value, dtype=float), (contact.size,)) if np.size(value) in (
-            1, contact.size) else None
+    for contact, value in zip(contacts, per):
+        try:
+            w = np.ones(contact.size) if value is None else np.broadcast_to(
+                np.array(value, dtype=float), (contact.size,)) if np.size(value) in (
+                1, contact.size) else None
+        except (TypeError, ValueError):
+            w = None
         if w is None or not (np.isfinite(w) & (w > 0.0)).all():
             raise SetpointError(f"wrench_weights of '{contact.name}': {contact.size} positive "
                                 f'numbers (or one), got {value!r}')
