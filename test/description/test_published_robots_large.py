@@ -1,0 +1,65 @@
+"""The published robots whose loading takes tens of seconds, beside the others'
+test_published_robots.py (the same checks, its helpers): the suite's two workers take one
+file each, so these run beside the rest instead of after it."""
+import pytest
+from test_published_robots import (  # noqa: F401 (widened_talos and friends: the test below)
+    LARGE,
+    REFUSED,
+    SPIN,
+    check_torques,
+    files,
+    load,
+    oracle,
+    read,
+    spin_locks,
+    widened_talos,
+)
+
+from cog_id_ros import MechanismConfigError
+
+LARGE_SPIN = [case for case in SPIN if case[0] in LARGE]
+LARGE_REFUSED = [case for case in REFUSED if case[0] in LARGE]
+
+
+@pytest.mark.parametrize('robot,spins', LARGE_SPIN)
+def test_large_spinning_robots_are_refused_naming_locked_joints_and_load_with_them(robot, spins):
+    with pytest.raises(MechanismConfigError) as info:
+        load(robot)
+    text = str(info.value)
+    assert info.value.parameter == 'mechanism.locked_joints', text
+    assert f'({spins} spin(s):' in text and '`idle_spins: lock`' in text, text
+    locked = load(robot, idle_spins='lock')
+    assert len(locked.locked_joints) == spins and len(locked.idle_spin_sets) == spins
+    named = load(robot, locked_joints=spin_locks(robot))
+    assert named.locked_joints == spin_locks(robot) and named.dof == locked.dof
+
+
+@pytest.mark.parametrize('robot,parameter,fragment', LARGE_REFUSED)
+def test_large_robots_refused_for_what_their_files_say(robot, parameter, fragment):
+    with pytest.raises(MechanismConfigError) as info:
+        load(robot, idle_spins='lock')
+    assert info.value.parameter == parameter, str(info.value)
+    assert fragment in str(info.value), str(info.value)
+
+
+def test_the_old_digit_biped_gives_pinocchios_torques():
+    pytest.importorskip('pinocchio')
+    mech = load('old/digit_like_2legs', idle_spins='lock')
+    check_torques(mech, oracle('old/digit_like_2legs', mech))
+
+
+def test_talos_torques_match_pinocchio_with_its_shin_limits_widened(tmp_path):
+    """TALOS as published: its two shin motors' URDF limits (those of the knee, [0, 2.618])
+    leave no closed pose; it loads with a warning that every setpoint would be refused as
+    'limit'. With those two <limit> widened (a copy), its 44 motors (12 of them coupled by
+    <mimic>: redundant) give Pinocchio's torques."""
+    pytest.importorskip('pinocchio')
+    from pinocchio_loops import LoopOracle
+    published = load('true_talos_2_legs', idle_spins='lock')
+    shins = [text for text in published.assembly_warnings if 'outside its position limits'
+             in text]
+    assert len(shins) == 2 and "'leg_left_shin_joint'" in shins[0], shins
+    mech, text = widened_talos(tmp_path)
+    folder, _, loops = files('true_talos_2_legs')
+    assert not [text for text in mech.assembly_warnings if 'position limits' in text]
+    check_torques(mech, LoopOracle(text, read(folder, loops), held=mech.locked_joints), 2)
