@@ -1,4 +1,4 @@
-"""Floating base and contacts (legged.md section 2): whole_body_torques against Pinocchio with
+"""Floating base and contacts (docs/floating_base.md): whole_body_torques against Pinocchio with
 a free-flyer root, the same loops and contact frames (test/pinocchio_loops.py), on a
 two-legged robot of the published collection as its authors wrote it."""
 import os
@@ -252,7 +252,7 @@ def test_refusals_name_what_to_fix(biped):
 
 
 def test_standing_on_one_foot_equals_the_robot_fixed_at_that_foot(biped):
-    """legged.md's check: one 6d contact and a motion that keeps it still (the base moves as
+    """The contract's check: one 6d contact and a motion that keeps it still (the base moves as
     the foot held at the world origin makes it: finite differences of that base pose along
     the motion) give the efforts of the same robot with that foot as its fixed base_link."""
     with warnings.catch_warnings():
