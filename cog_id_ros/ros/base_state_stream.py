@@ -21,7 +21,7 @@ import math
 import time
 from typing import Any, Callable, NamedTuple
 
-from .conversions import Rejected, stamp_to_ns
+from .conversions import Rejected, check_age, stamp_to_ns
 from .lost_messages import LostMessages
 from .setpoint_filter import NANOSECONDS, SetpointFilter, StampError
 
@@ -76,7 +76,8 @@ class BaseStateStream:
         raises Rejected. ``info``: rclpy's message info (losses, the publication time)."""
         if info is not None:
             self.lost.count(info)
-            self._check_age(info.get('source_timestamp'))
+            check_age(info.get('source_timestamp'), self.max_age_ns, 'base_state published',
+                      'base_state_timeout')
         pose, twist = msg.pose.pose, msg.twist.twist
         p, o = pose.position, pose.orientation
         quaternion = [o.x, o.y, o.z, o.w]
@@ -133,15 +134,3 @@ class BaseStateStream:
     def age(self) -> float | None:
         """Seconds since the latest accepted base state was received (None: none yet)."""
         return None if self.last_time is None else time.monotonic() - self.last_time
-
-    def _check_age(self, published: int | None) -> None:
-        """Rejected ('stale') when the base state was published more than the timeout ago
-        (DDS's source timestamp, the publisher's system clock)."""
-        if not published:
-            return
-        age = time.time_ns() - published
-        if age > self.max_age_ns:
-            raise Rejected('stale', f'base_state published {age / NANOSECONDS:.3g} s ago, more '
-                                    f'than base_state_timeout ({self.timeout:g} s): the node '
-                                    'was stopped or fell behind (or the clocks of the two '
-                                    'machines disagree)')

@@ -7,6 +7,7 @@ node counts in diagnostics) and a sentence for the log.
 import math
 import re
 import struct
+import time
 from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
@@ -106,6 +107,23 @@ def rejection(exc: BaseException | None, redundant: object = None) -> Rejected:
 def stamp_to_ns(stamp: Any) -> int:
     """A builtin_interfaces/Time as integer nanoseconds."""
     return stamp.sec * NANOSECONDS + stamp.nanosec
+
+
+def check_age(stamp: int | None, max_age_ns: int, what: str, parameter: str,
+                now: int | None = None) -> None:
+    """Rejected ('stale') when ``stamp`` (DDS's source or received timestamp: ns of the
+    publisher's or this machine's system clock, which time.time_ns reads; None or 0: not
+    known, no check) lies more than ``max_age_ns`` before ``now`` (time.time_ns()): after
+    the node was stopped and continued, or while it is behind, what it would send for an
+    old message reaches the motors late. ``what`` ("setpoint published", ...) and
+    ``parameter`` (the bound's name) word the message."""
+    if not stamp:
+        return
+    age = (time.time_ns() if now is None else now) - stamp
+    if age > max_age_ns:
+        raise Rejected('stale', f'{what} {age / NANOSECONDS:.3g} s ago, more than {parameter} '
+                                f'({max_age_ns / NANOSECONDS:g} s): the node was stopped or '
+                                'fell behind (or the clocks of the two machines disagree)')
 
 
 def duration_to_s(duration: Any) -> float:

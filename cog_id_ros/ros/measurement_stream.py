@@ -23,7 +23,7 @@ import time
 from typing import Any, Callable
 
 from .config import NodeConfig
-from .conversions import JointSelector, Rejected, nearest_turn, setpoint_arrays
+from .conversions import JointSelector, Rejected, check_age, nearest_turn, setpoint_arrays
 from .lost_messages import LostMessages
 from .setpoint_filter import NANOSECONDS
 
@@ -173,10 +173,5 @@ class MeasurementStream:
         would close the loop on the past."""
         now = time.time_ns()
         for key in ('source_timestamp', 'received_timestamp'):
-            stamp = info.get(key)
-            if stamp and now - stamp > self.max_age_ns:
-                raise Rejected('stale', f'measured state {key.split("_")[0]} '
-                               f'{(now - stamp) / NANOSECONDS:.3g} s ago, more than '
-                               f'measurement_timeout ({self.timeout:g} s): the node was '
-                               'stopped or fell behind (or the clocks of the two machines '
-                               'disagree)')
+            check_age(info.get(key), self.max_age_ns, f'measured state {key.split("_")[0]}',
+                      'measurement_timeout', now)

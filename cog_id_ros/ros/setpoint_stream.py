@@ -17,7 +17,14 @@ from typing import Any, Callable
 import numpy as np
 
 from .config import NodeConfig
-from .conversions import JointSelector, Rejected, nearest_turn, setpoint_arrays, stamp_to_ns
+from .conversions import (
+    JointSelector,
+    Rejected,
+    check_age,
+    nearest_turn,
+    setpoint_arrays,
+    stamp_to_ns,
+)
 from .diagnostics import Counts
 from .lost_messages import LostMessages
 from .setpoint_filter import NANOSECONDS, SetpointFilter, StampError
@@ -68,7 +75,8 @@ class SetpointStream:
         if info is not None:
             self._count_lost(info)
             if self.max_age_ns:
-                self._check_age(info.get('source_timestamp'))
+                check_age(info.get('source_timestamp'), self.max_age_ns, 'published',
+                          'max_setpoint_age')
         received, v = setpoint_arrays(msg, self.selector)
         stamp = stamp_to_ns(msg.header.stamp)
         unstamped = not stamp
@@ -119,20 +127,6 @@ class SetpointStream:
         self.filter.reset()
         self._stamp_rejections = 0
         return True
-
-    def _check_age(self, published: int | None) -> None:
-        """Rejected ('stale') when the setpoint was published more than max_setpoint_age
-        ago (``published``: DDS's source timestamp, ns of the publisher's system clock,
-        which time.time_ns reads on this machine): after the node was stopped and continued,
-        or while it is behind, a command for a past setpoint would reach the motors late."""
-        if not published:
-            return
-        age = time.time_ns() - published
-        if age > self.max_age_ns:
-            raise Rejected('stale', f'published {age / NANOSECONDS:.3g} s ago, more than '
-                           f'max_setpoint_age ({self.max_age_ns / NANOSECONDS:g} s): the node '
-                           'was stopped or fell behind (or the clocks of the two machines '
-                           'disagree)')
 
     def _positions_used(self, stamp: int, received: list[float]) -> list[float]:
         """The positions the setpoint is served at: unwrapped, checked for a jump.

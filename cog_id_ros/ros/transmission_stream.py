@@ -15,13 +15,13 @@ Velocities and efforts need the pose: a message that carries them without positi
 warm start follows its stream).
 """
 import math
-import time
 from typing import Any, Sequence
 
 import numpy as np
 from sensor_msgs.msg import JointState
 
 from ..core import CogIdError, Transmission
+from . import conversions
 from .conversions import JointSelector, Rejected, rejection, setpoint_arrays
 from .setpoint_filter import NANOSECONDS
 
@@ -53,14 +53,10 @@ def state_arrays(msg: JointState, selector: JointSelector, kind: str
 
 def check_age(info: Any, max_age: float, kind: str) -> None:
     """Rejected ('stale') when the message was published more than ``max_age`` s ago
-    (DDS's source timestamp; 0: no check)."""
-    published = None if info is None else info.get('source_timestamp')
-    if not max_age or not published:
-        return
-    age = (time.time_ns() - published) / NANOSECONDS
-    if age > max_age:
-        raise Rejected('stale', f'{kind} published {age:.3g} s ago, more than max_setpoint_age '
-                                f'({max_age:g} s): the node was stopped or fell behind')
+    (DDS's source timestamp; 0: no check): :func:`.conversions.check_age`."""
+    if max_age and info is not None:
+        conversions.check_age(info.get('source_timestamp'), int(max_age * NANOSECONDS),
+                              f'{kind} published', 'max_setpoint_age')
 
 
 def _finite(kind: str, *arrays: Any) -> None:
