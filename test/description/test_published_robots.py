@@ -118,8 +118,8 @@ def test_robots_that_load_as_published(robot):
     assert not mech.locked_joints and mech.dof == len(mech.active_joints)
 
 
-@pytest.mark.parametrize('robot,spins', SMALL_SPIN)
-def test_spinning_rods_are_refused_naming_locked_joints(robot, spins):
+def check_refused_naming_locked_joints(robot, spins):
+    """Refused for its idle spins, the message naming locked_joints and idle_spins: lock."""
     with pytest.raises(MechanismConfigError) as info:
         load(robot)
     text = str(info.value)
@@ -129,20 +129,35 @@ def test_spinning_rods_are_refused_naming_locked_joints(robot, spins):
     assert len(spin_locks(robot)) == spins
 
 
-@pytest.mark.parametrize('robot,spins', SMALL_SPIN)
-def test_spinning_robots_load_with_idle_spins_lock_or_the_named_joints(robot, spins):
+def check_loads_with_locks(robot, spins):
+    """Loads with idle_spins: lock, and with the joints the refusal names locked."""
     locked = load(robot, idle_spins='lock')
     assert len(locked.locked_joints) == spins and len(locked.idle_spin_sets) == spins
     named = load(robot, locked_joints=spin_locks(robot))
     assert named.locked_joints == spin_locks(robot) and named.dof == locked.dof
 
 
-@pytest.mark.parametrize('robot,parameter,fragment', SMALL_REFUSED)
-def test_robots_refused_for_what_their_files_say(robot, parameter, fragment):
+def check_refused(robot, parameter, fragment):
+    """Refused (with idle_spins: lock) naming ``parameter``, the message holding ``fragment``."""
     with pytest.raises(MechanismConfigError) as info:
         load(robot, idle_spins='lock')
     assert info.value.parameter == parameter, str(info.value)
     assert fragment in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize('robot,spins', SMALL_SPIN)
+def test_spinning_rods_are_refused_naming_locked_joints(robot, spins):
+    check_refused_naming_locked_joints(robot, spins)
+
+
+@pytest.mark.parametrize('robot,spins', SMALL_SPIN)
+def test_spinning_robots_load_with_idle_spins_lock_or_the_named_joints(robot, spins):
+    check_loads_with_locks(robot, spins)
+
+
+@pytest.mark.parametrize('robot,parameter,fragment', SMALL_REFUSED)
+def test_robots_refused_for_what_their_files_say(robot, parameter, fragment):
+    check_refused(robot, parameter, fragment)
 
 
 def test_the_disney_legs_free_motion_is_pinocchios_too():

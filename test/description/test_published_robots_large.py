@@ -2,44 +2,38 @@
 test_published_robots.py (the same checks, its helpers): the suite's two workers take one
 file each, so these run beside the rest instead of after it."""
 import pytest
-from test_published_robots import (  # noqa: F401 (widened_talos and friends: the test below)
+from test_published_robots import (
     LARGE,
     REFUSED,
     SPIN,
+    check_loads_with_locks,
+    check_refused,
+    check_refused_naming_locked_joints,
     check_torques,
     files,
     load,
     oracle,
     read,
-    spin_locks,
     widened_talos,
 )
-
-from cog_id_ros import MechanismConfigError
 
 LARGE_SPIN = [case for case in SPIN if case[0] in LARGE]
 LARGE_REFUSED = [case for case in REFUSED if case[0] in LARGE]
 
 
 @pytest.mark.parametrize('robot,spins', LARGE_SPIN)
-def test_large_spinning_robots_are_refused_naming_locked_joints_and_load_with_them(robot, spins):
-    with pytest.raises(MechanismConfigError) as info:
-        load(robot)
-    text = str(info.value)
-    assert info.value.parameter == 'mechanism.locked_joints', text
-    assert f'({spins} spin(s):' in text and '`idle_spins: lock`' in text, text
-    locked = load(robot, idle_spins='lock')
-    assert len(locked.locked_joints) == spins and len(locked.idle_spin_sets) == spins
-    named = load(robot, locked_joints=spin_locks(robot))
-    assert named.locked_joints == spin_locks(robot) and named.dof == locked.dof
+def test_large_spinning_rods_are_refused_naming_locked_joints(robot, spins):
+    check_refused_naming_locked_joints(robot, spins)
+
+
+@pytest.mark.parametrize('robot,spins', LARGE_SPIN)
+def test_large_spinning_robots_load_with_idle_spins_lock_or_the_named_joints(robot, spins):
+    check_loads_with_locks(robot, spins)
 
 
 @pytest.mark.parametrize('robot,parameter,fragment', LARGE_REFUSED)
 def test_large_robots_refused_for_what_their_files_say(robot, parameter, fragment):
-    with pytest.raises(MechanismConfigError) as info:
-        load(robot, idle_spins='lock')
-    assert info.value.parameter == parameter, str(info.value)
-    assert fragment in str(info.value), str(info.value)
+    check_refused(robot, parameter, fragment)
 
 
 def test_the_old_digit_biped_gives_pinocchios_torques():
