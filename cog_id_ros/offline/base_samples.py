@@ -31,6 +31,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..core.solve.whole_body import quaternion_rotations
 from . import derivatives, samples
 from .trajectory_io import FIELDS, Trajectory, TrajectoryError
 
@@ -141,7 +142,7 @@ def estimate(t: np.ndarray, pose: np.ndarray, velocity: np.ndarray | None,
     (an acceleration from the given velocity, else from the pose) and the formulas of the
     module docstring (needs derivatives.STENCIL rows and increasing times)."""
     p, q = pose[:, :3], continuous(pose[:, 3:])
-    rot = rotations(q)
+    rot = quaternion_rotations(q).reshape(-1, 3, 3)
     with np.errstate(all='ignore'):
         twist = None
         if velocity is None:
@@ -165,15 +166,6 @@ def continuous(q: np.ndarray) -> np.ndarray:
         return q.copy()
     flips = np.concatenate([[False], np.einsum('ij,ij->i', q[1:], q[:-1]) < 0.0])
     return q * np.where(np.logical_xor.accumulate(flips), -1.0, 1.0)[:, None]
-
-
-def rotations(q: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) world-from-base rotations of quaternions (qx, qy, qz, qw) (n, 4)."""
-    x, y, z, w = q.T
-    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
-                     2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
-                     2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-                    axis=1).reshape(-1, 3, 3)
 
 
 def _im_conj_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -181,8 +181,8 @@ def test_power_balance_with_moving_contacts(biped):
 
 def _base_part(solver, pose, theta, names, wrenches):
     """What the wrenches contribute to the base's rows: Q_b - base_wrench."""
-    from cog_id_ros.core.solve.whole_body import _rotation
-    r = _rotation(np.array([pose[3:]]))[0].reshape(3, 3)
+    from cog_id_ros.core.solve.whole_body import quaternion_rotations
+    r = quaternion_rotations(np.array([pose[3:]]))[0].reshape(3, 3)
     mech = solver.mechanism
     positions, rotations = solver.cog_poses(theta)
     total = np.zeros(6)
@@ -207,13 +207,13 @@ def _point(solver, theta, name):
 def _contact_twist(solver, pose, v, theta, thd, name, h=1e-6):
     """The contact frame's linear (and angular) velocity in world axes: finite differences
     of its world pose along the motion."""
-    from cog_id_ros.core.solve.whole_body import _rotation
+    from cog_id_ros.core.solve.whole_body import quaternion_rotations
     mech = solver.mechanism
     c = mech.contacts[name]
 
     def world(t):
         # base moves with body twist v: first order is enough for a derivative at t=0
-        rot = _rotation(np.array([pose[3:]]))[0].reshape(3, 3)
+        rot = quaternion_rotations(np.array([pose[3:]]))[0].reshape(3, 3)
         w = v[3:]
         skew = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
         rot_t = rot @ (np.eye(3) + t * skew)

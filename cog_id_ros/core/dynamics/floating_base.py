@@ -76,14 +76,21 @@ def floating_accelerations(cogs: Sequence[Cog], relative_v: Sequence[Motion],
     """(4'): each COG's acceleration and link's angular acceleration in the world, B axes:
     the base's own acceleration at the COG, Coriolis 2 w_b x cdot_i, and the fixed-base
     (4)."""
-    v_b, w_b, dv_b, dw_b = base
-    origin = sp.add(dv_b, sp.cross(w_b, v_b))            # the base origin's, classical
+    w_b, dw_b = base[1], base[3]
     out = []
     for (c, _), (v, w), (a, alpha) in zip(cogs, relative_v, relative_a):
-        at_cog = sp.add(sp.add(origin, sp.cross(dw_b, c)), sp.cross(w_b, sp.cross(w_b, c)))
+        at_cog = base_point_acceleration(base, c)
         out.append((sp.add(sp.add(at_cog, sp.scale(sp.cross(w_b, v), 2.0)), a),
                     sp.add(sp.add(dw_b, sp.cross(w_b, w)), alpha)))
     return out
+
+
+def base_point_acceleration(base: BaseMotion, c: Vec3) -> Vec3:
+    """The classical acceleration of the base-fixed point c (B axes): the base origin's,
+    dv_b + w_b x v_b, plus dw_b x c + w_b x (w_b x c)."""
+    v_b, w_b, dv_b, dw_b = base
+    origin = sp.add(dv_b, sp.cross(w_b, v_b))
+    return sp.add(sp.add(origin, sp.cross(dw_b, c)), sp.cross(w_b, sp.cross(w_b, c)))
 
 
 def base_forces(cogs: Sequence[Cog], forces: Sequence[Force | None]) -> list[Lane]:
@@ -102,11 +109,9 @@ def base_forces(cogs: Sequence[Cog], forces: Sequence[Force | None]) -> list[Lan
 def base_link_force(mechanism: MechanismLike, base: BaseMotion, gravity: Vec3) -> list[Lane]:
     """Eq. (5) for the base link itself (it moves with the base alone), as its rows of Q_b."""
     mass, com, inertia = mechanism.base_mass, mechanism.base_com, mechanism.base_inertia
-    v_b, w_b, dv_b, dw_b = base
     identity = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
-    a = sp.add(sp.add(sp.add(dv_b, sp.cross(w_b, v_b)), sp.cross(dw_b, com)),
-               sp.cross(w_b, sp.cross(w_b, com)))
-    f, n = newton_euler_force(mass, inertia, identity, gravity, a, w_b, dw_b)
+    a = base_point_acceleration(base, com)
+    f, n = newton_euler_force(mass, inertia, identity, gravity, a, base[1], base[3])
     return [*f, *sp.add(sp.cross(com, f), n)]
 
 

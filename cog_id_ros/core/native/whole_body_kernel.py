@@ -26,7 +26,7 @@ from ..linalg.lanes import columns, flat
 from ..value_types import FloatArray, Lane, Ops
 from . import native
 from .emitter import c_module_source, python_function
-from .kernels import KERNELS, kernel_key, unpack
+from .kernels import KERNELS, kernel_key, unpack, width
 from .straight_line import Graph, SymOps
 
 if TYPE_CHECKING:
@@ -113,7 +113,7 @@ class WholeBodyKernel:
              rotation: FloatArray) -> WholeBodyRecord:
         arrays = [np.ascontiguousarray(a, dtype=float) for a in (q, qd, qdd, base, rotation)]
         if self.name == 'native':
-            out = np.empty((len(q), sum(int(np.prod(s)) for _, s in self.layout)))
+            out = np.empty((len(q), width(self.layout)))
             self._module.whole_body_many(*arrays, out)
         else:
             lanes = [columns(a) for a in arrays]

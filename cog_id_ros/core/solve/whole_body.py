@@ -51,7 +51,7 @@ def whole_body_torques(solver: Any, base_pose: Any, base_velocity: Any, base_acc
         raise SetpointError('no sample: theta has 0 rows')
     pose, velocity, acceleration = _base_state(base_pose, base_velocity, base_acceleration, n,
                                                single)
-    rotation = _rotation(pose[:, 3:])
+    rotation = quaternion_rotations(pose[:, 3:])
     base = np.concatenate([velocity, acceleration], axis=1)
     kernel = whole_body_kernel(solved, solver.backend)
     if single:
@@ -173,41 +173,12 @@ def _base_state(pose: Any, velocity: Any, acceleration: Any, n: int, single: boo
     return out[0], out[1], out[2]
 
 
-def _accelerations(theta_ddot: Any, shape: tuple[int, ...]) -> np.ndarray:
-    if theta_ddot is None:
-        return np.zeros(shape)
-    try:
-        qdd = np.array(theta_ddot, dtype=float).reshape(shape)
-    except (TypeError, ValueError):
-        raise SetpointError(f'theta_ddot: one acceleration per active joint and sample '
-                            f'{shape}, got {theta_ddot!r}') from None
-    if not np.isfinite(qdd).all():
-        raise SetpointError('theta_ddot is not finite')
-    return qdd
-
-
-def _rotation(quaternion: np.ndarray) -> np.ndarray:
+def quaternion_rotations(quaternion: np.ndarray) -> np.ndarray:
     """(N, 9) row-major world-from-base rotations of unit quaternions (qx, qy, qz, qw)."""
     x, y, z, w = quaternion.T
     return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
                      2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
                      2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)
-
-
-def _rows(values: Sequence[Any], n: int) -> np.ndarray:
-    """A list of lanes -> (N, len)."""
-    return np.array([np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in values]
-                    ).reshape(len(values), n).T.copy()
-
-
-def _maps(rows: Sequence[Sequence[Any]], n: int) -> np.ndarray:
-    """Rows of lanes (r, k) -> (N, r, k)."""
-    r, k = len(rows), len(rows[0]) if rows else 0
-    out = np.zeros((n, r, k))
-    for i, row in enumerate(rows):
-        for j, value in enumerate(row):
-            out[:, i, j] = value
-    return out
 
 
 def _weights(contacts: Sequence[Any], given: Any) -> np.ndarray:
