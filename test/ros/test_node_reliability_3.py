@@ -281,7 +281,10 @@ def test_after_a_timeout_the_first_message_is_not_taken_as_the_reference(ros_pro
     r.stream(r.measured, lambda t: Rig.joint_state([1.5], [0.0]), 100, 0.3)
     status = r.diagnostics_after(time.monotonic())
     assert int(status['measurements_rejected.restart']) >= 1, status
-    assert len(r.commands) > count + 20 and proc.proc.poll() is None
+    # (once, in a fresh-clone run compiling every kernel, no command came at all: what the
+    # node counted and said is in the message, for the next time)
+    assert len(r.commands) > count + 20 and proc.proc.poll() is None, \
+        (len(r.commands) - count, status, proc.output[-2000:])
 
 
 # --- floods are counted -------------------------------------------------------------------------
