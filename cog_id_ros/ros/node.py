@@ -54,6 +54,7 @@ from .diagnostics import (
 from .feedback import FeedbackMode
 from .floating_mode import NO_TRAJECTORIES, FloatingBase
 from .joint_space_solver import JointSpaceSolver
+from .late_timer import LateTimer
 from .measurement_stream import MeasurementStream
 from .modes import Mode, make_mode
 from .parameters import NODE_PARAMETERS, is_mechanism_parameter
@@ -153,14 +154,14 @@ class CogIdNode(ReadOnlyNode):
             logger_name=self.get_logger().get_child('trajectories').name)
         self.timers_made = [self.create_timer(config.diagnostics_period,
                                               self.publish_diagnostics)]
-        self._timer_runs: dict[str, tuple[float | None, float]] = {}
-        self._timer_periods = {'setpoints': min(config.setpoint_timeout / 4.0, 0.25),
-                               'measured': min(config.measurement_timeout / 4.0, 0.25)}
+        self.timeout_timers = {                   # the timeout timers and their late runs
+            'setpoints': LateTimer(min(config.setpoint_timeout / 4.0, 0.25)),
+            'measured': LateTimer(min(config.measurement_timeout / 4.0, 0.25))}
         if config.setpoint_timeout > 0.0:
-            self.timers_made.append(self.create_timer(self._timer_periods['setpoints'],
+            self.timers_made.append(self.create_timer(self.timeout_timers['setpoints'].period,
                                                       self.check_timeout))
         if self.measurements is not None:
-            self.timers_made.append(self.create_timer(self._timer_periods['measured'],
+            self.timers_made.append(self.create_timer(self.timeout_timers['measured'].period,
                                                       self.check_measurement_timeout))
         self.get_logger().info(start_up_summary(self.mechanism, config))
         for warning in getattr(self.mechanism, 'assembly_warnings', None) or ():
@@ -441,15 +442,17 @@ class CogIdNode(ReadOnlyNode):
         feedback mode: the last setpoint stays in force, at rest). Judged on what has
         arrived: setpoints queued for the setpoint thread are served first (after a stall of
         the node the timer may wake before that thread does)."""
+        timer = self.timeout_timers['setpoints']
         with self.lock:
-            if not self.active or self._woke_late('setpoints'):
+            if not self.active or timer.woke_late(self.setpoints.last_time):
                 return
             self.setpoint_loop.serve_queued()
             self._check_timeout()
 
     def _check_timeout(self) -> None:
         config = self.config
-        if not self.setpoints.stopped_for(config.setpoint_timeout, self._resumed('setpoints')):
+        resumed = self.timeout_timers['setpoints'].resumed
+        if not self.setpoints.stopped_for(config.setpoint_timeout, resumed):
             return
         if self.mode.measured:
             cast(FeedbackMode, self.mode).setpoints_stopped()
@@ -469,8 +472,9 @@ class CogIdNode(ReadOnlyNode):
         or each was rejected): timeout_behavior at the last measured pose, once. The
         measured states (and setpoints) queued are served first."""
         stream = cast(MeasurementStream, self.measurements)
+        timer = self.timeout_timers['measured']
         with self.lock:
-            if not self.active or self._woke_late('measured'):
+            if not self.active or timer.woke_late(stream.last_time):
                 return
             # judged on what has arrived, not on when this process last ran: after a stall
             # the timer may wake before the measured state thread, with fresh states queued
@@ -481,7 +485,7 @@ class CogIdNode(ReadOnlyNode):
                 cast(Any, self.measurement_loop).subscription.topic_name)
             if warning:
                 self.get_logger().warning(warning)
-            if not stream.stopped_for(self.config.measurement_timeout, self._resumed('measured')):
+            if not stream.stopped_for(self.config.measurement_timeout, timer.resumed):
                 return
             self.counts.totals['timeouts'] += 1
             what = self.apply_timeout_behavior(stream.last_pose)
@@ -489,25 +493,6 @@ class CogIdNode(ReadOnlyNode):
                 self.get_logger().warning(
                     f'no measured state accepted for {self.config.measurement_timeout:g} s: '
                     f'{what}')
-
-    def _woke_late(self, timer: str) -> bool:
-        """Whether the timeout timer ``timer`` is to wait: it ran more than two of its
-        periods after its run before, less than a period ago. This process was stopped or
-        starved meanwhile, and what was sent to it then (fresh setpoints or measured states)
-        may still be on its way into the subscription: the timeout is judged a period after
-        the process runs again, on what arrived by then."""
-        now, period = time.monotonic(), self._timer_periods[timer]
-        last, resumed = self._timer_runs.get(timer, (None, -math.inf))
-        if last is not None and now - last > 2.0 * period:
-            resumed = now               # it was stopped: wait a period for the inputs
-        self._timer_runs[timer] = (now, resumed)
-        return now - resumed < period
-
-    def _resumed(self, timer: str) -> float:
-        """When this process last ran again after a stop or starvation seen by the timer
-        ``timer`` (monotonic; -inf: never): a stream's silence counts from then at the
-        earliest, as the node could not hear it while it did not run."""
-        return self._timer_runs.get(timer, (None, -math.inf))[1]
 
     def apply_timeout_behavior(self, pose: Sequence[float] | None) -> str | None:
         """Publish timeout_behavior's command once (hold: the gravity-holding efforts of
