@@ -44,6 +44,7 @@ class Rig:
         self.measured = node.create_publisher(JointState, 'measured_joint_states', QOS)
         self.efforts_out = node.create_publisher(Float64MultiArray, 'effort_command', QOS)
         self.commands, self.answers, self.states, self.status = [], [], [], {}
+        self.service_clients = {}
         node.create_subscription(Float64MultiArray, 'effort_command', lambda m: self.commands.append(
             (time.monotonic(), list(m.data))), QOS)
         node.create_subscription(JointState, 'joint_effort', lambda m: self.answers.append(
@@ -354,16 +355,26 @@ def test_a_flood_of_measured_states_is_counted_to_the_last(ros_process, rig):
 
 # --- the managed node ---------------------------------------------------------------------------
 
+def client_for(r, kind, name):
+    """The rig's client of service ``name`` (made once: a client made just before its call
+    may not be matched for the answer yet, and under load rmw then drops the answer,
+    "failed to send response (timeout)"), once the service is there."""
+    key = (kind, name)
+    if key not in r.service_clients:
+        r.service_clients[key] = r.node.create_client(kind, name)
+    assert r.service_clients[key].wait_for_service(30)
+    return r.service_clients[key]
+
+
 def change(r, namespace, transition=None):
     """Ask a managed node for a lifecycle transition (None: only wait for its service)."""
-    client = r.node.create_client(ChangeState, f'{namespace}/cog_id_node/change_state')
-    assert client.wait_for_service(30)
+    client = client_for(r, ChangeState, f'{namespace}/cog_id_node/change_state')
     if transition is None:
         return True
     request = ChangeState.Request()
     request.transition.id = transition
     for _ in range(3):
-        response = client.call(request, timeout_sec=60)
+        response = client.call(request, timeout_sec=30)
         if response is not None:
             return response.success
         # the answer can be lost while the transition was made (rmw: "failed to send
@@ -382,11 +393,13 @@ GOAL = {Transition.TRANSITION_CONFIGURE: State.PRIMARY_STATE_INACTIVE,
 
 
 def state_of(r, namespace):
-    """The managed node's lifecycle state id (None: no answer)."""
-    client = r.node.create_client(GetState, f'{namespace}/cog_id_node/get_state')
-    assert client.wait_for_service(30)
-    response = client.call(GetState.Request(), timeout_sec=30)
-    return None if response is None else response.current_state.id
+    """The managed node's lifecycle state id (None: no answer, asked three times)."""
+    client = client_for(r, GetState, f'{namespace}/cog_id_node/get_state')
+    for _ in range(3):
+        response = client.call(GetState.Request(), timeout_sec=20)
+        if response is not None:
+            return response.current_state.id
+    return None
 
 
 def test_a_failed_configure_can_be_tried_again(ros_process, rig, tmp_path):
@@ -411,7 +424,8 @@ def test_a_failed_configure_can_be_tried_again(ros_process, rig, tmp_path):
                        '-p', 'control_mode:=computed_torque', '-p', 'kp:=[-1.0]'])
     assert not change(r, '/badgain', Transition.TRANSITION_CONFIGURE)
     assert not change(r, '/badgain', Transition.TRANSITION_CONFIGURE)
-    assert wait_until(lambda: bad.output.count('configure failed: kp') == 2, 20), bad.output
+    # (each configure asked for is said; one whose answer was lost is asked again)
+    assert wait_until(lambda: bad.output.count('configure failed: kp') >= 2, 20), bad.output
 
 
 def test_an_inactive_node_holds_counts_what_arrives_and_shutdown_ends_the_process(
