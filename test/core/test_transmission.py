@@ -16,6 +16,7 @@ from cog_id_ros import (
     InverseDynamics,
     Mechanism,
     MechanismConfigError,
+    SetpointError,
     SingularConfigurationError,
     Transmission,
 )
@@ -123,6 +124,38 @@ def test_power_is_kept_and_the_jacobian_is_the_derivative_of_the_positions(path)
         numeric = np.array([(tr.to_joint_space(theta + h * e) - tr.to_joint_space(theta - h * e))
                             / (2 * h) for e in np.eye(m)]).T
         assert np.allclose(jac, numeric, rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize('path, joint_space', [
+    (ANKLE, None), (KNEE, None), (LEG, None),
+    (ANKLE, ['ankle_pitch', 'motor_left']),     # the pitch coupled to a motor named too
+])
+def test_one_sample_of_joint_efforts_equals_the_exact_map(path, joint_space):
+    """joint_efforts of one sample inverts J at once, only its block beside the joints that
+    are motors too (the TALOS-like leg's hip and knee); the batch takes K from the joints'
+    solver at each q. Both agree, and NaN or infinite efforts are refused, never mapped."""
+    mech = Mechanism.from_params_file(path)
+    if joint_space is not None:
+        params = mech.settled_parameters()
+        params['mechanism.joint_space'] = joint_space
+        mech = Mechanism.from_parameters(params)
+    tr, batch = Transmission(mech), Transmission(mech)
+    rng = np.random.default_rng(5)
+    m = len(mech.active_joints)
+    home = np.array(mech.assembled_positions)[mech.active_index]
+    thetas = home + rng.uniform(-0.15, 0.15, (6, m))    # (the joints within their limits)
+    tau_m = rng.normal(size=(6, m)) * 10
+    one = np.array([tr.joint_efforts(theta, tau) for theta, tau in zip(thetas, tau_m)])
+    exact = batch.joint_efforts(thetas, tau_m)
+    assert np.allclose(one, exact, rtol=1e-9, atol=1e-9 * np.abs(exact).max())
+    if tr._blocks.unit:     # the leg: its motors in the joint space take their own effort
+        for i, k in tr._blocks.unit:
+            assert not np.allclose(one[:, i], 0.0)
+    for bad in (math.nan, math.inf):
+        for call in (tr.joint_efforts, tr.actuator_efforts, tr.joint_velocities):
+            with pytest.raises(SetpointError) as err:
+                call(thetas[0], [bad] + [1.0] * (m - 1))
+            assert err.value.reason == 'non_finite'
 
 
 @pytest.mark.parametrize('path', [ANKLE, KNEE, LEG])

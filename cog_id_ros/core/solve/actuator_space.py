@@ -67,6 +67,10 @@ class ActuatorSpaceSolver:
         kernels = kernels_for(solved, backend)
         self._backend = kernels.name
         self._serial = SampleSolver(solved, kernels, self.continuation_step)
+        self._rows_memo: dict = {}      # _solved_rows of each set of rows asked for
+        #: the primary actuators' active joints, None where they are all in that order
+        self._primary_order = None if list(solved.primary) == list(
+            range(len(solved.active_joints))) else list(solved.primary)
         self._serial.refine = True      # closed past the tolerance where conditioning needs it
         self._batch = Batch(solved, self._serial, mechanism.joints_at)
         self._poses = PoseSolver(mechanism, self._serial, self._batch)
@@ -208,7 +212,8 @@ class ActuatorSpaceSolver:
 
     def closed_pose(self, q: Sequence[float], with_rates: bool = False,
                     rows: Optional[Sequence[int]] = None,
-                    limits: Optional[bool] = None) -> Tuple[List[float], Any]:
+                    limits: Optional[bool] = None,
+                    with_positions: bool = True) -> Tuple[List[float], Any]:
         """One sample at control rate: (every joint's position, mechanism.joints order; with
         ``with_rates`` the joint-rate map S (n_joints, M) there, else None) at the closed
         pose of the M actuator positions ``q``. The same numbers as :meth:`solve_positions`
@@ -216,9 +221,12 @@ class ActuatorSpaceSolver:
         evaluation of the pose); the warm start moves there. ``rows`` (joint indices): only
         those rows of S, as lists of floats where the joints are the solver's own
         coordinates (:meth:`_solved_rows`: the basis's rows as they are). ``limits``: the
-        actuators' position limits checked (default: check_position_limits)."""
+        actuators' position limits checked (default: check_position_limits). Without
+        ``with_positions`` the positions are [] (the joints read back from the pose, balls
+        written as three revolutes, are not: the rates alone are wanted)."""
         m = self.mechanism
-        target, _, _, single = setpoints(m, self._serial.wrapping, q, None, None,
+        zeros = self._serial.zeros          # (lists: a control loop's fast way in)
+        target, _, _, single = setpoints(m, self._serial.wrapping, q, zeros, zeros,
                                          self.check_position_limits if limits is None
                                          else limits)
         if not single:
@@ -227,11 +235,12 @@ class ActuatorSpaceSolver:
         _, state = self._serial.solve(self._state, target)
         coordinates, n = state[0], len(m.joints)
         chains = m.spherical_chains          # (joints read back from the pose: the kernel)
-        positions = m.joints_at(coordinates)[0].tolist() if chains else list(coordinates[:n])
+        positions = [] if not with_positions else m.joints_at(coordinates)[0].tolist() \
+            if chains else list(coordinates[:n])
         s: Any = None
         solved_rows = self._solved_rows(rows) if with_rates and rows is not None else None
         if solved_rows is not None:
-            s = _basis_rows(state[1], self._solved.primary, solved_rows, len(target))
+            s = _basis_rows(state[1], self._primary_order, solved_rows, len(target))
             if not math.isfinite(sum(map(sum, s))):      # (a NaN or inf anywhere)
                 raise out_of_range(list(target), [], None)
         elif with_rates:
@@ -256,10 +265,13 @@ class ActuatorSpaceSolver:
         """The solver's coordinates of joints ``rows`` (mechanism.joints indices) where each
         is one of its joints as written (not in a chain read back) and the mechanism is not
         redundant: their rates are the velocity basis's rows; else None."""
-        solved, names = self._solved, self.mechanism.joints
-        if solved.is_redundant or not all(names[j] in solved.joint_index for j in rows):
-            return None
-        return [solved.joint_index[names[j]] for j in rows]
+        key = tuple(rows)
+        if key not in self._rows_memo:
+            solved, names = self._solved, self.mechanism.joints
+            self._rows_memo[key] = None if solved.is_redundant or not all(
+                names[j] in solved.joint_index for j in rows) else \
+                [solved.joint_index[names[j]] for j in rows]
+        return self._rows_memo[key]
 
     def joint_rate_map(self, q: ArrayLike) -> np.ndarray:
         """S (n_joints, M), qdot = S thetadot, at the closed pose of ``q`` (M actuator
@@ -329,10 +341,13 @@ class ActuatorSpaceSolver:
         return values
 
 
-def _basis_rows(basis: Sequence[Sequence[float]], order: Sequence[int], rows: Sequence[int],
-                m: int) -> list[list[float]]:
+def _basis_rows(basis: Sequence[Sequence[float]], order: Optional[Sequence[int]],
+                rows: Sequence[int], m: int) -> list[list[float]]:
     """Rows ``rows`` of S from the velocity basis of a non-redundant mechanism: the basis's
-    column k is the rate per unit rate of primary actuator k, active joint order[k]."""
+    column k is the rate per unit rate of primary actuator k, active joint order[k] (None:
+    active joint k)."""
+    if order is None:
+        return [list(basis[j]) for j in rows]
     out = []
     for j in rows:
         row, b = [0.0] * m, basis[j]

@@ -55,7 +55,7 @@ from .inputs import out_of_range
 
 if TYPE_CHECKING:
     from ..model.mechanism import Mechanism
-    from ..native.kernels import PoseRecord, ReferenceKernels
+    from ..native.kernels import ClosureRecord, PoseRecord, ReferenceKernels
 
 #: Gauss-Newton iterations of the redundant projection, and the increment that ends it
 PROJECTION_ITERATIONS = 6
@@ -197,7 +197,8 @@ class SampleSolver:
         if final and self.redundant:
             q, record = self.project(q, record, goal, qd, qdd, sample)
         if last and self.refine and (self.redundant or record.largest_step *
-                                     record.condition * record.condition > self.accuracy):
+                                     record.condition * record.condition > self.accuracy) \
+                and not self._at_rounding(q, record):
             q, record = self.refined(q, record, goal, qd, qdd)
         if not record.condition <= m.max_condition_number:
             raise singular(m, record.condition, sample)
@@ -213,13 +214,17 @@ class SampleSolver:
         not closed (a prediction, or after an increment of LIKELY_CLOSED or more); after a
         small increment, or when ``likely_closed``, the whole record is evaluated at once."""
         kernels, tol, free, evaluate = self.kernels, self.tolerance, self.free, self.whole
-        whole = likely_closed
+        polish = self.refine and self.accuracy_factor < 1.0    # closing to rounding
+        whole = likely_closed and not polish
         # a ClosureRecord while the loops are probably not closed, a whole record once they are
         record: Any = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
             if loops_closed(record.worst, record.least_cosine, tol):
                 if not whole:
-                    record = evaluate(q, goal, qd, qdd)
+                    record = self._polished(q, record, goal, qd, qdd) if polish else \
+                        evaluate(q, goal, qd, qdd)
+                    q = record[-1] if polish else q
+                    record = record[0] if polish else record
                 return q, record, iteration, True
             if iteration == NEWTON_ITERATIONS:
                 break
@@ -232,11 +237,37 @@ class SampleSolver:
             q = list(q)
             for k, j in enumerate(free):
                 q[j] = q[j] - increment[k] * factor
-            whole = size * factor < LIKELY_CLOSED
+            whole = size * factor < LIKELY_CLOSED and not polish
             record = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         if not whole:
             record = evaluate(q, goal, qd, qdd)
         return q, record, iteration, False
+
+    def _at_rounding(self, q: Sequence[float], record: 'PoseRecord') -> bool:
+        """Closing to rounding, not redundant: whether the increment left at the polished
+        pose ``q`` is what the rounding of the loop equations makes (machine epsilon times
+        the condition number and the coordinates' size, with a margin of 4): another Newton
+        increment cannot make it smaller, and :meth:`refined` would only evaluate it again."""
+        if self.redundant or not self.accuracy_factor < 1.0:
+            return False
+        size = 1.0 + max(map(abs, map(q.__getitem__, self.free)), default=0.0)
+        return bool(record.largest_step <= 4.0 * ROUNDING * record.condition * size)
+
+    def _polished(self, q: Sequence[float], record: 'ClosureRecord', goal: Sequence[float],
+                  qd: Sequence[float], qdd: Sequence[float]) -> tuple['PoseRecord', Any]:
+        """Closing to rounding (close_to_rounding): the pose ``q``, closed to the tolerance
+        by the closure kernel's ``record``, moved by that record's increment (Newton's
+        quadratic convergence: from a pose closed to the tolerance one increment reaches
+        rounding, as :meth:`refined` would, without a second whole record), then its whole
+        record: (whole record, pose). Where that pose would not be closed (cannot be for an
+        increment this small; be safe), ``q`` as it was."""
+        moved = list(q)
+        for k, j in enumerate(self.free):
+            moved[j] = q[j] - record.increment[k]
+        better = self.whole(moved, goal, qd, qdd)
+        if loops_closed(better.worst, better.least_cosine, self.tolerance):
+            return better, moved
+        return self.whole(q, goal, qd, qdd), q
 
     def refined(self, q: Sequence[float], record: 'PoseRecord', goal: Sequence[float],
                 qd: Sequence[float], qdd: Sequence[float]

@@ -82,6 +82,8 @@ class Transmission:
         self._q = [mechanism.joint_index[name] for name in self.joint_space]
         self._theta = list(mechanism.active_index)
         self.redundant = mechanism.is_redundant
+        self._blocks = _MotorRows(self.joint_space, self.active_joints)
+        self._renames = _NamedSingular(self)
 
     # --- positions ----------------------------------------------------------------------
 
@@ -156,17 +158,13 @@ class Transmission:
         at theta (the linkage massless). One sample: K from the motion at theta alone
         (:meth:`_inverse_at`); N samples: from the joints' solver at each q."""
         if _one(theta) and not self.redundant:
-            jac = np.array(self._rows_at(self.actuators, theta, self._q), dtype=float)
-            try:
-                inverse = np.linalg.inv(jac)
-            except np.linalg.LinAlgError:
-                inverse = None
+            rows = self._rows_at(self.actuators, theta, self._q)
+            tau_q, size = self._blocks.efforts(rows, _vector(tau_m, len(self.active_joints)))
             # seen_condition of the joint space is at most scale / least (the basis's
             # primary columns are unit rates), and 1 / least = |J^-1|_2 <= |J^-1|_F:
             # well within the bound, K = J^-1 at once
-            if inverse is not None and self.actuators.rate_scale() * math.sqrt(
-                    float((inverse * inverse).sum())) <= self.mechanism.max_condition_number:
-                return _times(inverse.T.tolist(), tau_m)
+            if self.actuators.rate_scale() * size <= self.mechanism.max_condition_number:
+                return _finite(tau_q, tau_m)
         if _one(theta):
             with self._named():
                 k = self._inverse_at(_rate_map(self.actuators, theta))
@@ -216,7 +214,8 @@ class Transmission:
     def _rows_at(self, solver: ActuatorSpaceSolver, x: ArrayLike, rows: list) -> Any:
         """Rows ``rows`` of the joint-rate map S of one sample (lists of floats)."""
         with self._named():
-            return solver.closed_pose(_floats(x), with_rates=True, rows=rows)[1]
+            return solver.closed_pose(_floats(x), with_rates=True, rows=rows,
+                                      with_positions=False)[1]
 
     def _singular(self, error: SingularConfigurationError) -> SingularConfigurationError:
         where = '' if error.sample is None else f' at sample {error.sample}'
@@ -229,7 +228,7 @@ class Transmission:
             error.sample)
 
     def _named(self) -> '_NamedSingular':
-        return _NamedSingular(self)
+        return self._renames          # (one, reused: no state of its own)
 
 
 class _NamedSingular:
@@ -275,9 +274,77 @@ def _rate_map(solver: ActuatorSpaceSolver, x: ArrayLike) -> np.ndarray:
     return cast(np.ndarray, solver.closed_pose(_floats(x), with_rates=True)[1])
 
 
-def _times(rows: Any, vector: ArrayLike) -> np.ndarray:
-    """rows @ vector for one sample (lists of floats, or an array), on floats."""
-    width = len(rows[0]) if len(rows) else 0
+class _MotorRows:
+    """K^T tau_m = J^-T tau_m for a square J (not redundant) whose joint space names motors
+    too (a leg's hip and knee motors beside its ankle's joints): the row of J of a joint
+    that is motor k is e_k, so only the block A = J[R, F] of the other joints R and the
+    other motors F is inverted. With y = A^-T tau_m[F]: tau_q[R] = y, and the joint that
+    is motor k gets tau_m[k] - J[R, k] . y; K's Frobenius norm (the singularity check) is
+    sqrt(#motors named + |A^-1|_F^2 + |A^-1 J[R, C]|_F^2), C the motors named, at most
+    the bound :meth:`efforts` gives (beyond it the exact check decides)."""
+
+    def __init__(self, joint_space: list, active_joints: list) -> None:
+        index = {name: k for k, name in enumerate(active_joints)}
+        #: (row, motor) of each joint-space joint that is a motor; the other rows
+        self.unit = [(i, index[name]) for i, name in enumerate(joint_space) if name in index]
+        self.rest = [i for i, name in enumerate(joint_space) if name not in index]
+        named = {k for _, k in self.unit}
+        self.free = [k for k in range(len(active_joints)) if k not in named]
+
+    def efforts(self, rows: list, tau_m: list) -> tuple[list, float]:
+        """(tau_q, a bound of |K|_F) from J's ``rows`` and the motors' efforts ``tau_m``
+        (floats): |A^-1 J[R, C]|_F <= |A^-1|_F |J[R, C]|_F; inf where A is singular
+        (tau_q then is not to be used)."""
+        rest, free, unit = self.rest, self.free, self.unit
+        inverse_t, size = _inverse_transposed(
+            [[rows[i][k] for k in free] for i in rest] if unit else rows)
+        if inverse_t is None:
+            return [], math.inf
+        tau_f = [tau_m[k] for k in free] if unit else tau_m
+        y = [sum(map(operator.mul, row, tau_f)) for row in inverse_t]
+        if not unit:                    # no joint-space joint is a motor: J^-T tau_m
+            return y, size
+        tau_q = [0.0] * len(rows)
+        for i, value in zip(rest, y):
+            tau_q[i] = value
+        coupling = 0.0                                   # |J[R, C]|_F^2
+        if unit:
+            w = [0.0] * len(tau_m)                       # J[R, :]^T y
+            for r, value in zip(rest, y):
+                row = rows[r]
+                w = [a + value * b for a, b in zip(w, row)]
+                coupling += sum(row[k] * row[k] for _, k in unit)
+            for i, k in unit:
+                tau_q[i] = tau_m[k] - w[k]
+        return tau_q, math.sqrt(len(unit) + size * size * (1.0 + coupling))
+
+
+def _inverse_transposed(rows: list) -> tuple[Any, float]:
+    """(J^-T as rows, |J^-1|_F) of the square J given by ``rows`` (lists of floats);
+    (None, inf) where J is singular. One or two joints in closed form, more by numpy."""
+    if not rows:
+        return [], 0.0
+    if len(rows) == 1:
+        (a,), = rows
+        return ([[1.0 / a]], abs(1.0 / a)) if a != 0.0 else (None, math.inf)
+    if len(rows) == 2:
+        (a, b), (c, d) = rows
+        det = a * d - b * c
+        if det == 0.0:
+            return None, math.inf
+        return ([[d / det, -c / det], [-b / det, a / det]],
+                math.sqrt(a * a + b * b + c * c + d * d) / abs(det))
+    try:
+        inverse = np.linalg.inv(rows)
+    except np.linalg.LinAlgError:
+        return None, math.inf
+    flat = inverse.ravel()
+    return inverse.T.tolist(), math.sqrt(float(np.dot(flat, flat)))
+
+
+def _vector(vector: ArrayLike, width: int) -> list:
+    """One sample's ``width`` velocities or efforts as floats (SetpointError: another
+    shape; NaN or infinite ones are found in what is made of them, :func:`_times`)."""
     values: Any = vector.tolist() if isinstance(vector, np.ndarray) else vector
     try:
         v = [float(x) for x in values]
@@ -285,10 +352,22 @@ def _times(rows: Any, vector: ArrayLike) -> np.ndarray:
         raise _shape(width, np.shape(vector)) from None
     if len(v) != width:
         raise _shape(width, np.shape(vector))
-    if not all(map(math.isfinite, v)):
+    return v
+
+
+def _times(rows: Any, vector: ArrayLike) -> np.ndarray:
+    """rows @ vector for one sample (lists of floats, or an array), on floats."""
+    v = _vector(vector, len(rows[0]) if len(rows) else 0)
+    return _finite([sum(map(operator.mul, row, v)) for row in rows], v)
+
+
+def _finite(out: list, v: Any) -> np.ndarray:
+    """``out`` (made of the finite map's rows and ``v``) as an array; SetpointError where
+    ``v`` is not finite (a NaN or infinite entry of v makes one of out so: one check)."""
+    if not math.isfinite(sum(out)) and not all(map(math.isfinite, v)):
         raise SetpointError('velocities and efforts must be finite, got '
-                            f'{v}', reason='non_finite')
-    return np.array([sum(map(operator.mul, row, v)) for row in rows], dtype=float)
+                            f'{list(v)}', reason='non_finite')
+    return np.array(out, dtype=float)
 
 
 def _apply(matrices: np.ndarray, vectors: ArrayLike) -> np.ndarray:
