@@ -14,11 +14,11 @@ import collections
 import functools
 import logging
 import math
+import statistics
 import time
 from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-import numpy as np
 from rclpy.event_handler import PublisherEventCallbacks
 
 from ..core import CogIdError
@@ -414,17 +414,23 @@ class Report:
                 ('internal_errors', c['internal_errors'])]
 
     def _times(self) -> list[tuple[str, Any]]:
+        # (statistics, not numpy: numpy's median imports numpy.ma on its first call, 18 ms
+        # with the node's lock held, which stalled the control loop once a run)
         counts, last = self.node.counts, self.node.setpoints.last_time
-        times = np.array(counts.compute_times) * 1e6
-        sends = np.array(counts.publish_times) * 1e6
+        times, sends = list(counts.compute_times), list(counts.publish_times)
         since = '' if last is None else f'{time.monotonic() - last:.3f}'
-        return [('compute_time_median_us', f'{np.median(times):.1f}' if times.size else ''),
-                ('compute_time_max_us', f'{times.max():.1f}' if times.size else ''),
-                ('compute_time_samples', times.size),
-                ('publish_time_median_us', f'{np.median(sends):.1f}' if sends.size else ''),
-                ('publish_time_max_us', f'{sends.max():.1f}' if sends.size else ''),
+        return [('compute_time_median_us', _us(statistics.median, times)),
+                ('compute_time_max_us', _us(max, times)),
+                ('compute_time_samples', len(times)),
+                ('publish_time_median_us', _us(statistics.median, sends)),
+                ('publish_time_max_us', _us(max, sends)),
                 ('seconds_since_last_setpoint', since),
                 ('last_rejection', counts.last_rejection)]
+
+
+def _us(statistic: Callable[[list], float], seconds: list) -> str:
+    """``statistic`` of ``seconds`` in microseconds, one decimal ('' when there are none)."""
+    return f'{statistic(seconds) * 1e6:.1f}' if seconds else ''
 
 
 class DiagnosticsPublisher:

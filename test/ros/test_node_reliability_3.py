@@ -260,6 +260,40 @@ def test_a_timer_late_at_every_run_still_times_out_a_silent_stream(rclpy_context
         node.destroy_node()
 
 
+def test_the_first_diagnostics_with_figures_import_nothing(tmp_path):
+    """Issue item 3 (a gap between commands once a run, 12-24 ms, 0.8-1 s into every soak,
+    that followed diagnostics_period): the first /diagnostics with compute times took
+    numpy's median, which imports numpy.ma on its first call (18 ms, the node's lock held,
+    the control loop waiting). No module may be imported while the node serves."""
+    script = tmp_path / 'first_diagnostics.py'
+    script.write_text(f"""
+import sys
+sys.path[:0] = [{os.path.join(REPO, 'test')!r}, {os.path.join(REPO, 'test', 'ros')!r}]
+import rclpy
+from rclpy.parameter import Parameter
+from mechanisms import from_yaml
+from cog_id_ros.ros.node import CogIdNode
+context = rclpy.Context()
+rclpy.init(context=context, domain_id=int(sys.argv[1]))
+given = dict(from_yaml({FOUR_BAR!r}), control_mode='computed_torque', kp=[100.0],
+             kd=[20.0], diagnostics_period=0.2)
+node = CogIdNode(context=context, namespace='/firstdiag',
+                 parameter_overrides=[Parameter(k, value=v) for k, v in given.items()])
+node.publish_diagnostics()                  # at start-up: no figures yet
+node.counts.compute_times.extend([2e-5, 3e-5, 4e-5])
+node.counts.publish_times.extend([1e-5, 2e-5])
+before = set(sys.modules)
+node.publish_diagnostics()                  # the first with figures
+print(sorted(set(sys.modules) - before))
+""")
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, str(script), os.environ.get('ROS_DOMAIN_ID', '0')],
+                         capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == '[]', out.stdout
+
+
 # --- a second publisher on the measured topic ---------------------------------------------------
 
 def test_a_second_measured_publisher_never_takes_over_the_controller(ros_process, rig,
