@@ -51,8 +51,10 @@ DIAGNOSTIC_KEYS = {
     'internal_errors': 'exceptions the node caught in its own callbacks (a bug: please report)',
     'nodes_with_this_name': "nodes in the ROS graph with this node's name and namespace "
                             '(more than 1: every setpoint gets several commands)',
-    'last_closure_residual': 'max closure equation residual at the last served pose, m or rad',
-    'closure_condition_number': 'condition number of the closure Jacobian there',
+    'last_closure_residual': 'max closure equation residual at the last served pose (feedback '
+                             'modes: the last measured pose commanded from), m or rad; '
+                             "'' before one",
+    'closure_condition_number': "condition number of the closure Jacobian there; '' before one",
     'compute_time_median_us': "from receipt of a setpoint to its command ready to send (the "
                               "solve and the node's own work), last 1000",
     'compute_time_max_us': 'the same, maximum',
@@ -327,8 +329,8 @@ class Report:
                   ('backend', node.solver.backend),
                   *self._counted(),
                   ('nodes_with_this_name', same_name_nodes),
-                  ('last_closure_residual', f'{residual:.3g}'),
-                  ('closure_condition_number', f'{condition:.4g}'),
+                  ('last_closure_residual', _finite(residual, '.3g')),
+                  ('closure_condition_number', _finite(condition, '.4g')),
                   *self._times(), *feedback,
                   *(node.floating.diagnostics() if node.floating is not None else ())]
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values]
@@ -426,6 +428,12 @@ class Report:
                 ('publish_time_max_us', _us(max, sends)),
                 ('seconds_since_last_setpoint', since),
                 ('last_rejection', counts.last_rejection)]
+
+
+def _finite(value: float, spec: str) -> str:
+    """``value`` formatted by ``spec``; '' where it is not finite (no pose served yet, or
+    the solver refused it): never 'nan' in a message."""
+    return format(value, spec) if math.isfinite(value) else ''
 
 
 def _us(statistic: Callable[[list], float], seconds: list) -> str:

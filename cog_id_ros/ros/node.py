@@ -575,7 +575,9 @@ class CogIdNode(ReadOnlyNode):
         if not self.active:
             return
         self.diagnostics.count_same_name_nodes()
-        health = self.report.closure_health(self.setpoints.last_pose)   # outside the lock
+        served = self.measurements.last_pose if self.measurements is not None else \
+            self.setpoints.last_pose              # the last pose a command came from
+        health = self.report.closure_health(served)   # outside the lock
         with self.lock:
             status = self.report.status(*health)
         self.diagnostics.publish(status)

@@ -294,6 +294,27 @@ print(sorted(set(sys.modules) - before))
     assert out.stdout.strip().splitlines()[-1] == '[]', out.stdout
 
 
+def test_a_feedback_mode_reports_the_closure_at_the_measured_pose_never_nan(rclpy_context):
+    """/diagnostics said last_closure_residual "nan" in the feedback modes (it looked at the
+    last setpoint, which they may never get): it is the closure at the last measured pose
+    commanded from, and '' before there is one."""
+    from test_node_reliability_2 import in_node
+    node = in_node(rclpy_context, '/health', control_mode='gravity_compensation')
+    try:
+        sent = []
+        node.diagnostics.publish = sent.append
+        node.publish_diagnostics()
+        node.measurements.take(Rig.joint_state([1.2], [0.0])[0])
+        node.measurements.accept()
+        node.publish_diagnostics()
+        before, after = ({kv.key: kv.value for kv in status.values} for status in sent)
+        assert before['last_closure_residual'] == before['closure_condition_number'] == ''
+        assert float(after['last_closure_residual']) < 1e-9
+        assert 1.0 <= float(after['closure_condition_number']) < 1e6
+    finally:
+        node.destroy_node()
+
+
 # --- a second publisher on the measured topic ---------------------------------------------------
 
 def test_a_second_measured_publisher_never_takes_over_the_controller(ros_process, rig,
