@@ -122,7 +122,7 @@ def main():
         for median in results:
             ratio = median[key] / median['sample_torques']
             cells.append(f'{median[key] * 1e6:.1f} us' + ('' if key == 'sample_torques'
-                                                           else f' ({ratio:.1f}x)'))
+                                                           else f' ({ratio:.2f}x)'))
         print(f'| {key} | ' + ' | '.join(cells) + ' |', flush=True)
 
 

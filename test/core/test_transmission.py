@@ -158,6 +158,67 @@ def test_one_sample_of_joint_efforts_equals_the_exact_map(path, joint_space):
             assert err.value.reason == 'non_finite'
 
 
+def with_joint_space(path, joint_space):
+    params = Mechanism.from_params_file(path).settled_parameters()
+    params['mechanism.joint_space'] = joint_space
+    return Mechanism.from_parameters(params)
+
+
+def test_no_map_gives_a_nan_or_infinite_number():
+    """An adversarial pass: batches, a redundant mechanism's one sample and finite inputs
+    too large mapped NaN or inf silently (only one sample of a square map refused them).
+    Every map now refuses: non_finite for NaN or infinite inputs, out_of_range where finite
+    ones overflow; a batch names the sample."""
+    tr = Transmission(Mechanism.from_params_file(ANKLE))
+    zeros = np.zeros((3, 2))
+    bad = np.ones((3, 2))
+    bad[1, 0] = math.nan
+    for call in (tr.joint_velocities, tr.actuator_efforts, tr.joint_efforts):
+        with pytest.raises(SetpointError) as err:
+            call(zeros, bad)
+        assert err.value.reason == 'non_finite' and err.value.sample == 1, err.value
+    q = tr.to_joint_space(zeros)
+    with pytest.raises(SetpointError) as err:
+        tr.actuator_velocities(q, bad)
+    assert err.value.reason == 'non_finite' and err.value.sample == 1
+    coupled = Transmission(with_joint_space(ANKLE, ['ankle_pitch', 'motor_left']))
+    with pytest.raises(SetpointError) as err:
+        coupled.actuator_velocities(coupled.to_joint_space([0.0, 0.0]), [1e308, 1.0])
+    assert err.value.reason == 'out_of_range'
+    redundant = Transmission(with_joint_space('config/five_bar_redundant.yaml', ['j1', 'j5']))
+    theta = np.array(redundant.mechanism.assembled_positions)[redundant.mechanism.active_index]
+    with pytest.raises(SetpointError) as err:
+        redundant.joint_efforts(theta, [math.nan, 1.0, 1.0])
+    assert err.value.reason == 'non_finite'
+
+
+@pytest.mark.parametrize('vector', [b'12', '12', {1.0, 2.0}, {'a': 1.0, 'b': 2.0},
+                                    [1j, 2.0], [True, 1.0]])
+def test_velocities_and_efforts_are_real_numbers(ankle, vector):
+    """Bytes, a string, a set, a dict, complex numbers and truth values were taken as
+    efforts (b'12' as [49, 50]); refused, saying what came."""
+    with pytest.raises(SetpointError, match='expected 2 real numbers'):
+        Transmission(ankle).joint_efforts([0.0, 0.0], vector)
+    assert Transmission(ankle).joint_efforts([0.0, 0.0], [np.float32(1.0), np.int64(2)]).shape \
+        == (2,)
+
+
+def test_a_batch_of_joint_efforts_keeps_the_motors_branch_past_the_toggle(knee):
+    """Past the knee's toggle (motor at 1.64 rad, the knee coming back from its peak) the
+    batch took K at the knee angle from the joints' solver, which takes the other motor
+    angle of that knee angle: the sign of the knee's effort came out wrong. The batch
+    follows the per-sample rule now, as one sample does."""
+    one, batch = Transmission(knee), Transmission(knee)
+    walk = np.arange(0.0, 1.64, 0.005)
+    for theta in walk:
+        one.to_joint_space([theta])
+    tau_q = one.joint_efforts([1.64], [1.0])
+    efforts = batch.joint_efforts(np.append(walk, 1.64)[:, None], np.ones((len(walk) + 1, 1)))
+    assert efforts[-1] == pytest.approx(tau_q, rel=1e-12)
+    rate = one.joint_velocities([1.64], [1.0])
+    assert tau_q[0] * rate[0] == pytest.approx(1.0, rel=1e-9)      # power: tau_m = 1, rate 1
+
+
 @pytest.mark.parametrize('path', [ANKLE, KNEE, LEG])
 def test_joint_space_torques_of_a_motion_equal_the_actuator_torques_of_the_same_motion(path):
     """The exact motor torques of a joint-space motion (the rods' inertia and gravity in

@@ -8,7 +8,6 @@ adds joint space to it), a thin face over the modules that do the work.
 
 Successive calls keep the assembly branch: each is warm-started from the previous one.
 """
-import itertools
 import math
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast
 
@@ -259,7 +258,7 @@ class ActuatorSpaceSolver:
     def rate_scale(self) -> float:
         """The size (Frobenius norm) of the velocity basis at the pose the solver is at:
         every coordinate's rate per unit rate of the primary actuators, over all of them."""
-        return math.hypot(*itertools.chain.from_iterable(self._state[1]))
+        return math.hypot(*[math.hypot(*row) for row in self._state[1]])
 
     def _solved_rows(self, rows: Sequence[int]) -> Optional[List[int]]:
         """The solver's coordinates of joints ``rows`` (mechanism.joints indices) where each

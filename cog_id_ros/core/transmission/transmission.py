@@ -26,6 +26,7 @@ sets. Every call keeps each solver's assembly branch (warm starts), a batch foll
 per-sample rule.
 """
 import math
+import numbers
 import operator
 from typing import Any, Literal, Optional, cast
 
@@ -165,12 +166,29 @@ class Transmission:
             # well within the bound, K = J^-1 at once
             if self.actuators.rate_scale() * size <= self.mechanism.max_condition_number:
                 return _finite(tau_q, tau_m)
-        if _one(theta):
-            with self._named():
-                k = self._inverse_at(_rate_map(self.actuators, theta))
-        else:
-            k = self.inverse_jacobian(self.to_joint_space(theta))
+        if not _one(theta):
+            return self._joint_efforts_each(theta, tau_m)
+        with self._named():
+            k = self._inverse_at(_rate_map(self.actuators, theta))
         return _apply(np.swapaxes(k, -1, -2), tau_m)
+
+    def _joint_efforts_each(self, theta: ArrayLike, tau_m: ArrayLike) -> np.ndarray:
+        """N samples of :meth:`joint_efforts`, one after the other from the warm start (the
+        per-sample rule: K at each theta on the motors' branch; through q, the joints'
+        solver took the other theta of the same q past a toggle, and the sign with it)."""
+        thetas, efforts = np.asarray(theta, dtype=float), np.asarray(tau_m, dtype=float)
+        if efforts.shape != thetas.shape:
+            raise _shape(thetas.shape[-1], efforts.shape, len(thetas))
+        out = []
+        for i, (one, tau) in enumerate(zip(thetas, efforts)):
+            try:
+                out.append(self.joint_efforts(one, tau))
+            except SingularConfigurationError as exc:
+                raise self._singular(SingularConfigurationError(
+                    'singular', exc.condition_number, i)) from None
+            except SetpointError as exc:
+                raise SetpointError(f'sample {i}: {exc}', i, exc.reason or 'malformed') from None
+        return np.array(out, dtype=float).reshape(len(thetas), len(self._q))
 
     def _inverse_at(self, s: np.ndarray) -> np.ndarray:
         """K = dtheta/dq (M, D) from the joint-rate map S (n_joints, M) of one pose: an
@@ -288,8 +306,9 @@ class _MotorRows:
         #: (row, motor) of each joint-space joint that is a motor; the other rows
         self.unit = [(i, index[name]) for i, name in enumerate(joint_space) if name in index]
         self.rest = [i for i, name in enumerate(joint_space) if name not in index]
-        named = {k for _, k in self.unit}
-        self.free = [k for k in range(len(active_joints)) if k not in named]
+        #: the motors named in the joint space, and the others
+        self.named = [k for _, k in self.unit]
+        self.free = [k for k in range(len(active_joints)) if k not in self.named]
 
     def efforts(self, rows: list, tau_m: list) -> tuple[list, float]:
         """(tau_q, a bound of |K|_F) from J's ``rows`` and the motors' efforts ``tau_m``
@@ -308,14 +327,14 @@ class _MotorRows:
         for i, value in zip(rest, y):
             tau_q[i] = value
         coupling = 0.0                                   # |J[R, C]|_F^2
-        if unit:
-            w = [0.0] * len(tau_m)                       # J[R, :]^T y
-            for r, value in zip(rest, y):
-                row = rows[r]
-                w = [a + value * b for a, b in zip(w, row)]
-                coupling += sum(row[k] * row[k] for _, k in unit)
-            for i, k in unit:
-                tau_q[i] = tau_m[k] - w[k]
+        w = [0.0] * len(tau_m)                           # J[R, :]^T y
+        for r, value in zip(rest, y):
+            row = rows[r]
+            w = [a + value * b for a, b in zip(w, row)]
+            named = [row[k] for k in self.named]
+            coupling += sum(map(operator.mul, named, named))
+        for i, k in unit:
+            tau_q[i] = tau_m[k] - w[k]
         return tau_q, math.sqrt(len(unit) + size * size * (1.0 + coupling))
 
 
@@ -346,10 +365,13 @@ def _vector(vector: ArrayLike, width: int) -> list:
     """One sample's ``width`` velocities or efforts as floats (SetpointError: another
     shape; NaN or infinite ones are found in what is made of them, :func:`_times`)."""
     values: Any = vector.tolist() if isinstance(vector, np.ndarray) else vector
-    try:
-        v = [float(x) for x in values]
-    except (TypeError, ValueError):
-        raise _shape(width, np.shape(vector)) from None
+    if _real(values) and width == 1:
+        values = [values]                       # one joint: a number, as positions take
+    if not isinstance(values, (list, tuple)) or not (
+            set(map(type, values)) <= _PLAIN or all(map(_real, values))):
+        raise SetpointError(f'expected {width} real numbers (a list, tuple or float array), '
+                            f'got {type(vector).__name__} {_short(vector)}')
+    v = [float(x) for x in values]
     if len(v) != width:
         raise _shape(width, np.shape(vector))
     return v
@@ -364,22 +386,57 @@ def _times(rows: Any, vector: ArrayLike) -> np.ndarray:
 def _finite(out: list, v: Any) -> np.ndarray:
     """``out`` (made of the finite map's rows and ``v``) as an array; SetpointError where
     ``v`` is not finite (a NaN or infinite entry of v makes one of out so: one check)."""
-    if not math.isfinite(sum(out)) and not all(map(math.isfinite, v)):
-        raise SetpointError('velocities and efforts must be finite, got '
-                            f'{list(v)}', reason='non_finite')
+    if not math.isfinite(sum(out)):
+        if not all(map(math.isfinite, v)):
+            raise SetpointError('velocities and efforts must be finite, got '
+                                f'{list(v)}', reason='non_finite')
+        raise SetpointError(f'velocities or efforts {list(v)} too large: what they map to '
+                            'is beyond the range of a double', reason='out_of_range')
     return np.array(out, dtype=float)
 
 
 def _apply(matrices: np.ndarray, vectors: ArrayLike) -> np.ndarray:
     """matrices @ vectors, one sample ((R, C) @ (C,)) or N ((N, R, C) @ (N, C))."""
-    v = np.asarray(vectors, dtype=float)
+    try:
+        v = np.asarray(vectors, dtype=float)
+    except (TypeError, ValueError):
+        raise SetpointError(f'expected real numbers, got {_short(vectors)}') from None
     if matrices.ndim == 2:
         if v.shape != matrices.shape[1:]:
             raise _shape(matrices.shape[1], v.shape)
-        return matrices @ v
-    if v.shape != (matrices.shape[0], matrices.shape[2]):
-        raise _shape(matrices.shape[2], v.shape, matrices.shape[0])
-    return np.einsum('nrc,nc->nr', matrices, v)
+        out = matrices @ v
+    else:
+        if v.shape != (matrices.shape[0], matrices.shape[2]):
+            raise _shape(matrices.shape[2], v.shape, matrices.shape[0])
+        out = np.einsum('nrc,nc->nr', matrices, v)
+    bad = ~np.isfinite(out).all(axis=-1) if out.ndim > 1 else \
+        np.array([not np.isfinite(out).all()])
+    if bad.any():                     # never a NaN or infinite result: say which sample
+        i = int(np.argmax(bad))
+        row = v if v.ndim == 1 else v[i]
+        where = '' if out.ndim == 1 else f'sample {i}: '
+        if not np.isfinite(row).all():
+            raise SetpointError(f'{where}velocities and efforts must be finite, got '
+                                f'{row.tolist()}', None if out.ndim == 1 else i, 'non_finite')
+        raise SetpointError(f'{where}velocities or efforts {row.tolist()} too large: what '
+                            'they map to is beyond the range of a double',
+                            None if out.ndim == 1 else i, 'out_of_range')
+    return out
+
+
+#: the types of a control loop's numbers (the fast check of :func:`_vector`)
+_PLAIN = {float, int}
+
+
+def _real(x: Any) -> bool:
+    """Whether ``x`` is a real number (numpy's too), not a truth value."""
+    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+
+
+def _short(value: Any) -> str:
+    """``value`` as text of 60 characters at most (an error message's)."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + '...'
 
 
 def _shape(width: int, got: tuple, samples: Optional[int] = None) -> Exception:
