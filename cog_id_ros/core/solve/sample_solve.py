@@ -88,6 +88,12 @@ class SampleSolver:
     accuracy_factor = ACCURACY_FACTOR
 
     @property
+    def closes_to_rounding(self) -> bool:
+        """Whether poses are closed to rounding (ActuatorSpaceSolver.close_to_rounding: an
+        accuracy_factor below 1), not to the tolerance: :meth:`_polished`."""
+        return self.refine and self.accuracy_factor < 1.0
+
+    @property
     def accuracy(self) -> float:
         """The largest relative_error a pose is left at (where rounding allows):
         accuracy_factor (newton.ACCURACY_FACTOR) times the closure tolerance."""
@@ -214,17 +220,16 @@ class SampleSolver:
         not closed (a prediction, or after an increment of LIKELY_CLOSED or more); after a
         small increment, or when ``likely_closed``, the whole record is evaluated at once."""
         kernels, tol, free, evaluate = self.kernels, self.tolerance, self.free, self.whole
-        polish = self.refine and self.accuracy_factor < 1.0    # closing to rounding
+        polish = self.closes_to_rounding
         whole = likely_closed and not polish
         # a ClosureRecord while the loops are probably not closed, a whole record once they are
         record: Any = evaluate(q, goal, qd, qdd) if whole else kernels.closure(q)
         for iteration in range(NEWTON_ITERATIONS + 1):
             if loops_closed(record.worst, record.least_cosine, tol):
-                if not whole:
-                    record = self._polished(q, record, goal, qd, qdd) if polish else \
-                        evaluate(q, goal, qd, qdd)
-                    q = record[-1] if polish else q
-                    record = record[0] if polish else record
+                if polish:
+                    record, q = self._polished(q, record, goal, qd, qdd)
+                elif not whole:
+                    record = evaluate(q, goal, qd, qdd)
                 return q, record, iteration, True
             if iteration == NEWTON_ITERATIONS:
                 break
@@ -248,7 +253,7 @@ class SampleSolver:
         pose ``q`` is what the rounding of the loop equations makes (machine epsilon times
         the condition number and the coordinates' size, with a margin of 4): another Newton
         increment cannot make it smaller, and :meth:`refined` would only evaluate it again."""
-        if self.redundant or not self.accuracy_factor < 1.0:
+        if self.redundant or not self.closes_to_rounding:
             return False
         size = 1.0 + max(map(abs, map(q.__getitem__, self.free)), default=0.0)
         return bool(record.largest_step <= 4.0 * ROUNDING * record.condition * size)

@@ -157,15 +157,16 @@ class Transmission:
     def joint_efforts(self, theta: ArrayLike, tau_m: ArrayLike) -> np.ndarray:
         """tau_q = K^T tau_m (D,) or (N, D): the joint-space efforts the motors' efforts make
         at theta (the linkage massless). One sample: K from the motion at theta alone
-        (:meth:`_inverse_at`); N samples: from the joints' solver at each q."""
+        (:meth:`_inverse_at`); N samples: the same, one after the other."""
         if _one(theta) and not self.redundant:
             rows = self._rows_at(self.actuators, theta, self._q)
-            tau_q, size = self._blocks.efforts(rows, _vector(tau_m, len(self.active_joints)))
+            v = _vector(tau_m, len(self.active_joints))
+            tau_q, size = self._blocks.efforts(rows, v)
             # seen_condition of the joint space is at most scale / least (the basis's
             # primary columns are unit rates), and 1 / least = |J^-1|_2 <= |J^-1|_F:
             # well within the bound, K = J^-1 at once
             if self.actuators.rate_scale() * size <= self.mechanism.max_condition_number:
-                return _finite(tau_q, tau_m)
+                return _finite(tau_q, v)
         if not _one(theta):
             return self._joint_efforts_each(theta, tau_m)
         with self._named():
@@ -387,12 +388,19 @@ def _finite(out: list, v: Any) -> np.ndarray:
     """``out`` (made of the finite map's rows and ``v``) as an array; SetpointError where
     ``v`` is not finite (a NaN or infinite entry of v makes one of out so: one check)."""
     if not math.isfinite(sum(out)):
-        if not all(map(math.isfinite, v)):
-            raise SetpointError('velocities and efforts must be finite, got '
-                                f'{list(v)}', reason='non_finite')
-        raise SetpointError(f'velocities or efforts {list(v)} too large: what they map to '
-                            'is beyond the range of a double', reason='out_of_range')
+        raise _unmappable(list(v))
     return np.array(out, dtype=float)
+
+
+def _unmappable(values: list, sample: Optional[int] = None) -> SetpointError:
+    """The error for velocities or efforts ``values`` whose map is not finite: non_finite
+    where they are not, else out_of_range (finite, but what they map to overflows)."""
+    where = '' if sample is None else f'sample {sample}: '
+    if not all(map(math.isfinite, values)):
+        return SetpointError(f'{where}velocities and efforts must be finite, got {values}',
+                             sample, 'non_finite')
+    return SetpointError(f'{where}velocities or efforts {values} too large: what they map '
+                         'to is beyond the range of a double', sample, 'out_of_range')
 
 
 def _apply(matrices: np.ndarray, vectors: ArrayLike) -> np.ndarray:
@@ -409,18 +417,10 @@ def _apply(matrices: np.ndarray, vectors: ArrayLike) -> np.ndarray:
         if v.shape != (matrices.shape[0], matrices.shape[2]):
             raise _shape(matrices.shape[2], v.shape, matrices.shape[0])
         out = np.einsum('nrc,nc->nr', matrices, v)
-    bad = ~np.isfinite(out).all(axis=-1) if out.ndim > 1 else \
-        np.array([not np.isfinite(out).all()])
+    bad = ~np.isfinite(np.atleast_2d(out)).all(axis=-1)
     if bad.any():                     # never a NaN or infinite result: say which sample
         i = int(np.argmax(bad))
-        row = v if v.ndim == 1 else v[i]
-        where = '' if out.ndim == 1 else f'sample {i}: '
-        if not np.isfinite(row).all():
-            raise SetpointError(f'{where}velocities and efforts must be finite, got '
-                                f'{row.tolist()}', None if out.ndim == 1 else i, 'non_finite')
-        raise SetpointError(f'{where}velocities or efforts {row.tolist()} too large: what '
-                            'they map to is beyond the range of a double',
-                            None if out.ndim == 1 else i, 'out_of_range')
+        raise _unmappable(np.atleast_2d(v)[i].tolist(), None if out.ndim == 1 else i)
     return out
 
 
